@@ -1,0 +1,28 @@
+//! Hardware trigger lines (camera trigger, light strobe) and the times they actually fired.
+
+use crate::error::ErrorType;
+
+/// Which lines to fire together.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub struct TriggerLines {
+    pub camera: bool,
+    pub light: bool,
+}
+
+/// A fire acknowledged by the trigger device.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct FireReport {
+    /// The tick the fire was asked for.
+    pub tick: u64,
+    /// When the device says it fired, on its own clock, microseconds.
+    pub device_us: u64,
+    /// Host monotonic time the acknowledgement arrived, nanoseconds.
+    pub acked_ns: u64,
+}
+
+/// A device that fires trigger lines. `fire` is called from the tick and must not block.
+pub trait Trigger: ErrorType {
+    fn fire(&mut self, tick: u64, lines: TriggerLines) -> Result<(), Self::Error>;
+    /// Take an acknowledged fire if one arrived (never blocks).
+    fn poll_fired(&mut self) -> Result<Option<FireReport>, Self::Error>;
+}

@@ -1,0 +1,67 @@
+#!/usr/bin/env bash
+# Idempotent project setup: everything the build and the tests need, installed by the project's
+# own files so that a fresh clone (and CI) gets the same thing as a developer's machine.
+#
+#   .deps/lib/   libmujoco.so (MuJoCo 3.17.0) and libonnxruntime.so (ONNX Runtime 1.31.1),
+#                unpacked from their PyPI wheels; cargo and the binaries find them without exports
+#   .venv/       Python test peers: numpy, mcap, mcap-protobuf-support, xarm-python-sdk, onnx
+#   Debian       pkg-config and libudev-dev (serial port enumeration), when missing and we are root
+set -euo pipefail
+cd "$(dirname "$0")/.."
+ROOT=$(pwd)
+MUJOCO_VERSION=3.17.0
+ORT_VERSION=1.31.1
+DEPS="$ROOT/.deps"
+LIB="$DEPS/lib"
+mkdir -p "$LIB" "$DEPS/wheels"
+
+say() { printf 'setup: %s\n' "$*"; }
+
+# --- Debian packages the build needs -------------------------------------------------------
+need_pkgs=()
+for p in pkg-config libudev-dev; do
+  dpkg-query -W -f='${Status}' "$p" 2>/dev/null | grep -q 'install ok installed' || need_pkgs+=("$p")
+done
+if [ ${#need_pkgs[@]} -gt 0 ]; then
+  if [ "$(id -u)" = 0 ]; then
+    say "installing Debian packages: ${need_pkgs[*]}"
+    apt-get update -qq && DEBIAN_FRONTEND=noninteractive apt-get install -y -qq "${need_pkgs[@]}" >/dev/null
+  else
+    say "missing Debian packages ${need_pkgs[*]}: run 'sudo apt-get install ${need_pkgs[*]}'" >&2
+    exit 1
+  fi
+fi
+
+# --- Shared libraries from PyPI wheels ------------------------------------------------------
+fetch_lib() { # name==version, member inside the wheel, file name to write
+  local spec=$1 member=$2 out=$3
+  if [ -f "$LIB/$out" ]; then return 0; fi
+  say "fetching $spec wheel for $out"
+  rm -rf "$DEPS/wheels/tmp" && mkdir -p "$DEPS/wheels/tmp"
+  python3 -m pip download --quiet --no-deps --only-binary=:all: "$spec" -d "$DEPS/wheels/tmp"
+  python3 - "$DEPS/wheels/tmp" "$member" "$LIB/$out" <<'PY'
+import sys, zipfile, glob, shutil
+folder, member, out = sys.argv[1:]
+wheel = glob.glob(folder + "/*.whl")[0]
+with zipfile.ZipFile(wheel) as z, z.open(member) as src, open(out + ".part", "wb") as dst:
+    shutil.copyfileobj(src, dst)
+shutil.move(out + ".part", out)
+PY
+  rm -rf "$DEPS/wheels/tmp"
+}
+fetch_lib "mujoco==$MUJOCO_VERSION" "mujoco/libmujoco.so.$MUJOCO_VERSION" "libmujoco.so.$MUJOCO_VERSION"
+fetch_lib "onnxruntime==$ORT_VERSION" "onnxruntime/capi/libonnxruntime.so.$ORT_VERSION" "libonnxruntime.so.$ORT_VERSION"
+ln -sf "libmujoco.so.$MUJOCO_VERSION" "$LIB/libmujoco.so"
+ln -sf "libonnxruntime.so.$ORT_VERSION" "$LIB/libonnxruntime.so"
+
+# --- Python venv with the test peers --------------------------------------------------------
+VENV="$ROOT/.venv"
+STAMP="$VENV/.hitl-peers-v1"
+if [ ! -f "$STAMP" ]; then
+  say "creating Python venv with test peers in .venv"
+  python3 -m venv "$VENV"
+  "$VENV/bin/pip" install --quiet --upgrade pip
+  "$VENV/bin/pip" install --quiet -r "$ROOT/scripts/requirements-test.txt"
+  touch "$STAMP"
+fi
+say "ready (.deps/lib, .venv)"

@@ -1,0 +1,63 @@
+//! `hitl`: the DreamSat-Bench hardware-in-the-loop controller.
+//!
+//! This file only parses the command line and hands each subcommand to its module in [`cli`];
+//! every subcommand returns one of the contract's exit codes ([`exit`]).
+
+mod cli;
+mod exit;
+
+use clap::{Parser, Subcommand};
+use std::process::ExitCode;
+
+/// Hardware-in-the-loop controller for the DreamSat-Bench xArm7 testbed.
+///
+/// Without `--arm`, `run` drives the embedded MuJoCo stub on loopback: a real arm moves only when
+/// the operator names its address.
+#[derive(Debug, Parser)]
+#[command(name = "hitl", version, about, long_about = None)]
+struct Cli {
+    #[command(subcommand)]
+    command: Command,
+}
+
+#[derive(Debug, Subcommand)]
+enum Command {
+    /// Plan an orbital trajectory (ROE -> HCW -> lab frame -> IK) and write it as NPZ.
+    Plan(cli::plan::PlanArgs),
+    /// Preflight a trajectory: limits, clearances, steps. Exit 0 safe, 3 unsafe, 2 bad input.
+    Check(cli::check::CheckArgs),
+    /// Serve the MuJoCo stub of arm, camera and light on loopback (xArm protocol).
+    Stub(cli::stub::StubArgs),
+    /// Play a trajectory with every interlock armed (the embedded stub unless --arm is given).
+    Run(cli::run::RunArgs),
+    /// `hitl run` with a recording: the same flags, and a default file under runs/.
+    Record(cli::run::RunArgs),
+    /// Summarise a recording: summary JSON, plots and an index.html.
+    Report(cli::report::ReportArgs),
+    /// Pose metrics of a recording, as the paper defines them.
+    Eval(cli::eval::EvalArgs),
+    /// Benchmarks; `--json` prints one JSON object of figures.
+    Bench(cli::bench::BenchArgs),
+}
+
+fn main() -> ExitCode {
+    let cli = match Cli::try_parse() {
+        Ok(cli) => cli,
+        Err(e) => {
+            let code = if e.use_stderr() { exit::BAD_INPUT } else { exit::OK };
+            let _ = e.print();
+            return ExitCode::from(code);
+        }
+    };
+    let code = match cli.command {
+        Command::Plan(args) => cli::plan::run(args),
+        Command::Check(args) => cli::check::run(args),
+        Command::Stub(args) => cli::stub::run(args),
+        Command::Run(args) => cli::run::run(args, false),
+        Command::Record(args) => cli::run::run(args, true),
+        Command::Report(args) => cli::report::run(args),
+        Command::Eval(args) => cli::eval::run(args),
+        Command::Bench(args) => cli::bench::run(args),
+    };
+    ExitCode::from(code)
+}

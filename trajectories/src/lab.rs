@@ -1,0 +1,409 @@
+//! The lab configuration (TOML): where things are in the enclosure, and the limits every motion
+//! must respect. Every field has a documented default, so an empty file is the default lab.
+//!
+//! Frames: the **lab frame** has its origin at a floor corner of the enclosure, x along its 8 ft
+//! length, y along its 4 ft width, z up. The **base frame** is the arm's (xArm7 base, z up). The
+//! arm base sits in the lab at `arm.base_in_lab_m` turned by `arm.base_yaw_deg` about z.
+
+use crate::geometry::Capsule;
+use crate::kinematics::{CameraBody, DOF, MAX_JOINT_SPEED};
+use nalgebra::{Isometry3, Point3, Translation3, UnitQuaternion, Vector3};
+use serde::{Deserialize, Serialize};
+use std::path::Path;
+
+/// Why a lab configuration was refused.
+#[derive(Debug, thiserror::Error)]
+pub enum ConfigError {
+    #[error("cannot read lab config {path}: {source}")]
+    Read { path: String, source: std::io::Error },
+    #[error("lab config {path} is not valid TOML for hitl: {message}")]
+    Parse { path: String, message: String },
+    #[error("lab config: {0}")]
+    Invalid(String),
+}
+
+/// The whole lab configuration. `LabConfig::default()` is the DreamSat-Bench enclosure.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize, Default)]
+#[serde(default, deny_unknown_fields)]
+pub struct LabConfig {
+    pub enclosure: Enclosure,
+    pub arm: ArmPlacement,
+    pub target: Target,
+    pub light: LightPlacement,
+    pub camera: CameraMount,
+    pub margins: Margins,
+    pub limits: JointLimits,
+    pub interlocks: Interlocks,
+}
+
+/// The enclosure box in the lab frame, from the origin to `size_m`.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct Enclosure {
+    /// Inner size (x, y, z), metres. Default 8 ft x 4 ft x 4 ft = 2.438 x 1.219 x 1.219 m.
+    pub size_m: [f64; 3],
+}
+
+impl Default for Enclosure {
+    fn default() -> Self {
+        Self { size_m: [2.438, 1.219, 1.219] }
+    }
+}
+
+/// Where the arm's base sits in the lab.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct ArmPlacement {
+    /// Base origin in the lab frame, metres. Default: 0.9 m along, centred across, on the floor.
+    pub base_in_lab_m: [f64; 3],
+    /// Base rotation about the lab's z axis, degrees. Default 0 (base x along the lab's x).
+    pub base_yaw_deg: f64,
+}
+
+impl Default for ArmPlacement {
+    fn default() -> Self {
+        Self { base_in_lab_m: [0.9, 0.6095, 0.0], base_yaw_deg: 0.0 }
+    }
+}
+
+/// The target (spacecraft model) on its tripod.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct Target {
+    /// Target centre in the arm-base frame, metres. Default (0.45, 0, 0.30).
+    pub position_base_m: [f64; 3],
+    /// Target orientation in the base frame as roll, pitch, yaw (degrees, applied z-y-x).
+    pub rpy_deg: [f64; 3],
+    /// Radius of the keep-out sphere around the target centre, metres. Default 0.04.
+    pub keepout_radius_m: f64,
+    /// Radius of the tripod column from the floor up to the target, metres. Default 0.03.
+    pub tripod_radius_m: f64,
+    /// Greatest dimension of the real spacecraft, metres (the paper scales every model to 2 m).
+    pub real_size_m: f64,
+    /// Greatest dimension of the physical (printed) model, metres. When set, the planner's scale
+    /// is `model_size_m / real_size_m` instead of the paper's workspace scale.
+    pub model_size_m: Option<f64>,
+}
+
+impl Default for Target {
+    fn default() -> Self {
+        Self {
+            position_base_m: [0.45, 0.0, 0.30],
+            rpy_deg: [0.0, 0.0, 0.0],
+            keepout_radius_m: 0.04,
+            tripod_radius_m: 0.03,
+            real_size_m: 2.0,
+            model_size_m: None,
+        }
+    }
+}
+
+/// The studio light that plays the Sun.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct LightPlacement {
+    /// Light position in the lab frame, metres. Default near the far end, high.
+    pub position_lab_m: [f64; 3],
+    /// Keep-out sphere radius around the light and its Fresnel, metres. Default 0.2.
+    pub keepout_radius_m: f64,
+}
+
+impl Default for LightPlacement {
+    fn default() -> Self {
+        Self { position_lab_m: [2.2, 0.3, 0.9], keepout_radius_m: 0.2 }
+    }
+}
+
+/// The camera on the flange.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct CameraMount {
+    /// Optical centre in the flange frame, metres. Default 6 cm out along the flange's z.
+    pub translation_m: [f64; 3],
+    /// Camera axes (OpenCV: x right, y down, z forward) in the flange frame as roll, pitch, yaw
+    /// (degrees, z-y-x). Default 0: the optical axis is the flange's z.
+    pub rpy_deg: [f64; 3],
+    /// The camera body as a capsule behind the optical centre.
+    pub body: CameraBody,
+    /// Nearest the optical centre may come to the target centre, metres. Default 0.06.
+    pub min_target_distance_m: f64,
+}
+
+impl Default for CameraMount {
+    fn default() -> Self {
+        Self {
+            translation_m: [0.0, 0.0, 0.06],
+            rpy_deg: [0.0, 0.0, 0.0],
+            body: CameraBody::default(),
+            min_target_distance_m: 0.06,
+        }
+    }
+}
+
+/// Safety margins added to every limit and clearance.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct Margins {
+    /// Distance kept from each joint limit, radians. Default 0.05 (about 3 degrees).
+    pub joint_limit_rad: f64,
+    /// Clearance kept from every enclosure wall, floor and ceiling, metres. Default 0.05.
+    pub wall_m: f64,
+    /// Clearance kept from the target, tripod and light keep-outs, metres. Default 0.03.
+    pub keepout_m: f64,
+}
+
+impl Default for Margins {
+    fn default() -> Self {
+        Self { joint_limit_rad: 0.05, wall_m: 0.05, keepout_m: 0.03 }
+    }
+}
+
+/// Per-joint kinematic limits for playback. Defaults are well below the xArm7's 180 deg/s.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct JointLimits {
+    /// Peak joint speed, rad/s. Default 1.0 (57 deg/s) for every joint.
+    pub velocity_rad_s: [f64; DOF],
+    /// Peak joint acceleration, rad/s^2. Default 4.0.
+    pub acceleration_rad_s2: [f64; DOF],
+    /// Peak joint jerk, rad/s^3. Default 60.
+    pub jerk_rad_s3: [f64; DOF],
+    /// Largest change of any joint between two setpoints, radians. Default 0.01: servo mode
+    /// runs each step at full speed, so a large step is a violent motion.
+    pub max_step_rad: f64,
+    /// Limits of the slow approach from the arm's pose to the first waypoint: speed (rad/s).
+    pub approach_velocity_rad_s: f64,
+    /// Approach acceleration, rad/s^2.
+    pub approach_acceleration_rad_s2: f64,
+    /// Approach jerk, rad/s^3.
+    pub approach_jerk_rad_s3: f64,
+}
+
+impl Default for JointLimits {
+    fn default() -> Self {
+        Self {
+            velocity_rad_s: [1.0; DOF],
+            acceleration_rad_s2: [4.0; DOF],
+            jerk_rad_s3: [60.0; DOF],
+            max_step_rad: 0.01,
+            approach_velocity_rad_s: 0.3,
+            approach_acceleration_rad_s2: 0.8,
+            approach_jerk_rad_s3: 8.0,
+        }
+    }
+}
+
+/// Run-time interlock thresholds.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct Interlocks {
+    /// Longest gap between arm reports before the watchdog trips, milliseconds. Default 100.
+    pub report_timeout_ms: u64,
+    /// Largest |commanded - measured| on any joint, radians. Default 0.08.
+    pub max_deviation_rad: f64,
+    /// Trip on any arm warning code, not only on errors. Default true.
+    pub trip_on_warning: bool,
+}
+
+impl Default for Interlocks {
+    fn default() -> Self {
+        Self { report_timeout_ms: 100, max_deviation_rad: 0.08, trip_on_warning: true }
+    }
+}
+
+fn rpy(deg: &[f64; 3]) -> UnitQuaternion<f64> {
+    UnitQuaternion::from_euler_angles(deg[0].to_radians(), deg[1].to_radians(), deg[2].to_radians())
+}
+
+impl LabConfig {
+    /// Read and validate a TOML lab configuration.
+    pub fn load(path: &Path) -> Result<Self, ConfigError> {
+        let text = std::fs::read_to_string(path)
+            .map_err(|source| ConfigError::Read { path: path.display().to_string(), source })?;
+        Self::from_toml(&text).map_err(|e| match e {
+            ConfigError::Parse { message, .. } => {
+                ConfigError::Parse { path: path.display().to_string(), message }
+            }
+            other => other,
+        })
+    }
+
+    /// Parse and validate TOML text.
+    pub fn from_toml(text: &str) -> Result<Self, ConfigError> {
+        let config: LabConfig = toml::from_str(text)
+            .map_err(|e| ConfigError::Parse { path: "<text>".into(), message: e.to_string() })?;
+        config.validate()?;
+        Ok(config)
+    }
+
+    /// The configuration as TOML (for the `run` metadata record and `--print-config`).
+    pub fn to_toml(&self) -> String {
+        toml::to_string_pretty(self).unwrap_or_default()
+    }
+
+    /// Refuse values that make no physical sense.
+    pub fn validate(&self) -> Result<(), ConfigError> {
+        let bad = |m: String| Err(ConfigError::Invalid(m));
+        let finite = |name: &str, v: &[f64]| -> Result<(), ConfigError> {
+            if v.iter().all(|x| x.is_finite()) {
+                Ok(())
+            } else {
+                Err(ConfigError::Invalid(format!("{name} must be finite numbers")))
+            }
+        };
+        finite("enclosure.size_m", &self.enclosure.size_m)?;
+        finite("arm.base_in_lab_m", &self.arm.base_in_lab_m)?;
+        finite("target.position_base_m", &self.target.position_base_m)?;
+        finite("light.position_lab_m", &self.light.position_lab_m)?;
+        finite("camera.translation_m", &self.camera.translation_m)?;
+        if self.enclosure.size_m.iter().any(|s| *s <= 0.0) {
+            return bad("enclosure.size_m must be positive".into());
+        }
+        let lo = Point3::origin();
+        let hi = Point3::from(Vector3::from(self.enclosure.size_m));
+        let base = Point3::from(Vector3::from(self.arm.base_in_lab_m));
+        if (0..3).any(|a| base[a] < lo[a] || base[a] > hi[a]) {
+            return bad(format!(
+                "arm.base_in_lab_m {:?} is outside the enclosure",
+                self.arm.base_in_lab_m
+            ));
+        }
+        for (j, v) in self.limits.velocity_rad_s.iter().enumerate() {
+            if !(*v > 0.0 && *v <= MAX_JOINT_SPEED) {
+                return bad(format!(
+                    "limits.velocity_rad_s[{j}] = {v} must be in (0, {MAX_JOINT_SPEED:.4}] (the xArm7's 180 deg/s)"
+                ));
+            }
+        }
+        for (name, vals) in [
+            ("limits.acceleration_rad_s2", &self.limits.acceleration_rad_s2),
+            ("limits.jerk_rad_s3", &self.limits.jerk_rad_s3),
+        ] {
+            if let Some((j, v)) =
+                vals.iter().enumerate().find(|(_, v)| !(**v > 0.0 && v.is_finite()))
+            {
+                return bad(format!("{name}[{j}] = {v} must be positive"));
+            }
+        }
+        let positive = [
+            ("limits.max_step_rad", self.limits.max_step_rad),
+            ("limits.approach_velocity_rad_s", self.limits.approach_velocity_rad_s),
+            ("limits.approach_acceleration_rad_s2", self.limits.approach_acceleration_rad_s2),
+            ("limits.approach_jerk_rad_s3", self.limits.approach_jerk_rad_s3),
+            ("interlocks.max_deviation_rad", self.interlocks.max_deviation_rad),
+            ("target.real_size_m", self.target.real_size_m),
+        ];
+        if let Some((name, v)) = positive.iter().find(|(_, v)| !(*v > 0.0 && v.is_finite())) {
+            return bad(format!("{name} = {v} must be positive"));
+        }
+        let non_negative = [
+            ("margins.joint_limit_rad", self.margins.joint_limit_rad),
+            ("margins.wall_m", self.margins.wall_m),
+            ("margins.keepout_m", self.margins.keepout_m),
+            ("target.keepout_radius_m", self.target.keepout_radius_m),
+            ("target.tripod_radius_m", self.target.tripod_radius_m),
+            ("light.keepout_radius_m", self.light.keepout_radius_m),
+            ("camera.min_target_distance_m", self.camera.min_target_distance_m),
+        ];
+        if let Some((name, v)) = non_negative.iter().find(|(_, v)| !(*v >= 0.0 && v.is_finite())) {
+            return bad(format!("{name} = {v} must be zero or positive"));
+        }
+        if self.limits.approach_velocity_rad_s > MAX_JOINT_SPEED {
+            return bad("limits.approach_velocity_rad_s exceeds the xArm7's 180 deg/s".into());
+        }
+        if self.interlocks.report_timeout_ms == 0 {
+            return bad("interlocks.report_timeout_ms must be positive".into());
+        }
+        if let Some(m) = self.target.model_size_m {
+            if !(m > 0.0 && m.is_finite()) {
+                return bad(format!("target.model_size_m = {m} must be positive"));
+            }
+        }
+        Ok(())
+    }
+
+    /// The arm base's pose in the lab frame.
+    pub fn base_in_lab(&self) -> Isometry3<f64> {
+        let p = self.arm.base_in_lab_m;
+        Isometry3::from_parts(
+            Translation3::new(p[0], p[1], p[2]),
+            UnitQuaternion::from_axis_angle(&Vector3::z_axis(), self.arm.base_yaw_deg.to_radians()),
+        )
+    }
+
+    /// Flange-to-camera transform (camera in OpenCV axes).
+    pub fn camera_mount(&self) -> Isometry3<f64> {
+        let t = self.camera.translation_m;
+        Isometry3::from_parts(Translation3::new(t[0], t[1], t[2]), rpy(&self.camera.rpy_deg))
+    }
+
+    /// The target's pose in the base frame.
+    pub fn target_in_base(&self) -> Isometry3<f64> {
+        let p = self.target.position_base_m;
+        Isometry3::from_parts(Translation3::new(p[0], p[1], p[2]), rpy(&self.target.rpy_deg))
+    }
+
+    /// Target centre in the base frame.
+    pub fn target_position_base(&self) -> Point3<f64> {
+        Point3::from(Vector3::from(self.target.position_base_m))
+    }
+
+    /// The enclosure box in the lab frame: (lower corner, upper corner).
+    pub fn enclosure_box(&self) -> (Point3<f64>, Point3<f64>) {
+        (Point3::origin(), Point3::from(Vector3::from(self.enclosure.size_m)))
+    }
+
+    /// Keep-out volumes in the base frame, by name: the target sphere, the tripod column from the
+    /// floor to the bottom of the target sphere, and the light.
+    pub fn keepouts_base(&self) -> [(&'static str, Capsule); 3] {
+        let lab_to_base = self.base_in_lab().inverse();
+        let target = self.target_position_base();
+        let floor_z_base = (lab_to_base * Point3::new(0.0, 0.0, 0.0)).z;
+        let tripod_top = target - Vector3::z() * self.target.keepout_radius_m;
+        let tripod_foot = Point3::new(target.x, target.y, floor_z_base);
+        let light = lab_to_base * Point3::from(Vector3::from(self.light.position_lab_m));
+        [
+            ("target", Capsule::sphere(target, self.target.keepout_radius_m)),
+            ("tripod", Capsule::new(tripod_foot, tripod_top, self.target.tripod_radius_m)),
+            ("light", Capsule::sphere(light, self.light.keepout_radius_m)),
+        ]
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn empty_file_is_the_default_lab() {
+        let c = LabConfig::from_toml("").expect("default");
+        assert_eq!(c, LabConfig::default());
+        assert_eq!(c.enclosure.size_m, [2.438, 1.219, 1.219]);
+    }
+
+    #[test]
+    fn round_trips_through_toml() {
+        let c = LabConfig::default();
+        let back = LabConfig::from_toml(&c.to_toml()).expect("round trip");
+        assert_eq!(back, c);
+    }
+
+    #[test]
+    fn refuses_unknown_keys_and_bad_values() {
+        let e = LabConfig::from_toml("[limits]\nvelocity = 1.0\n").unwrap_err();
+        assert!(e.to_string().contains("velocity"), "{e}");
+        let e = LabConfig::from_toml("[limits]\nvelocity_rad_s = [4.0,1,1,1,1,1,1]\n").unwrap_err();
+        assert!(e.to_string().contains("velocity_rad_s[0]"), "{e}");
+        let e = LabConfig::from_toml("[arm]\nbase_in_lab_m = [5.0, 0.5, 0.0]\n").unwrap_err();
+        assert!(e.to_string().contains("outside the enclosure"), "{e}");
+    }
+
+    #[test]
+    fn keepouts_sit_where_configured() {
+        let c = LabConfig::default();
+        let k = c.keepouts_base();
+        assert_eq!(k[0].1.a, Point3::new(0.45, 0.0, 0.30));
+        // The light is at lab (2.2, 0.3, 0.9); the base at lab (0.9, 0.6095, 0).
+        assert!((k[2].1.a - Point3::new(1.3, -0.3095, 0.9)).norm() < 1e-9);
+    }
+}

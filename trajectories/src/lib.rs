@@ -1,0 +1,23 @@
+//! `hitl-trajectories`: everything about a trajectory before it reaches the loop.
+//!
+//! - [`trajectory`]: the typed trajectory of the NPZ schema;
+//! - [`npz`]: loading and writing it with a real NPY/NPZ library, with typed errors;
+//! - [`timing`]: time parametrisation from waypoints to setpoints at the control rate;
+//! - [`kinematics`]: xArm7 forward kinematics, joint limits and the link-capsule model;
+//! - [`geometry`]: capsules, segment distances, clearances;
+//! - [`lab`]: the lab configuration (enclosure, arm base, keep-outs, camera mount, limits);
+//! - [`preflight`]: the `hitl check` rules;
+//! - [`orbit`], [`ik`], [`planner`]: the orbital planner that writes NPZ presets.
+
+pub mod geometry;
+pub mod ik;
+pub mod kinematics;
+pub mod lab;
+pub mod npz;
+pub mod orbit;
+pub mod planner;
+pub mod preflight;
+pub mod timing;
+pub mod trajectory;
+
+pub use trajectory::Trajectory;
