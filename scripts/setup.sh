@@ -2,7 +2,8 @@
 # Idempotent project setup: everything the build and the tests need, installed by the project's
 # own files so that a fresh clone (and CI) gets the same thing as a developer's machine.
 #
-#   .deps/lib/   libmujoco.so (MuJoCo 3.17.0) and libonnxruntime.so (ONNX Runtime 1.31.1),
+#   .deps/lib/   libmujoco.so (MuJoCo 3.17.0), libonnxruntime.so (ONNX Runtime 1.31.1) and
+#                libOrbbecSDK.so (Orbbec SDK 2.9.3, loaded at run time by the Orbbec driver),
 #                unpacked from their PyPI wheels; cargo and the binaries find them without exports
 #   .venv/       Python test peers: numpy, mcap, mcap-protobuf-support, xarm-python-sdk, onnx
 #   Debian       pkg-config and libudev-dev (serial port enumeration), when missing and we are root
@@ -11,6 +12,8 @@ cd "$(dirname "$0")/.."
 ROOT=$(pwd)
 MUJOCO_VERSION=3.17.0
 ORT_VERSION=1.31.1
+ORBBEC_WHEEL_VERSION=2.1.2   # pyorbbecsdk2 wheel; ships Orbbec SDK v2 (C API) as libOrbbecSDK.so.2.9.3
+ORBBEC_SDK_VERSION=2.9.3
 DEPS="$ROOT/.deps"
 LIB="$DEPS/lib"
 mkdir -p "$LIB" "$DEPS/wheels"
@@ -51,8 +54,10 @@ PY
 }
 fetch_lib "mujoco==$MUJOCO_VERSION" "mujoco/libmujoco.so.$MUJOCO_VERSION" "libmujoco.so.$MUJOCO_VERSION"
 fetch_lib "onnxruntime==$ORT_VERSION" "onnxruntime/capi/libonnxruntime.so.$ORT_VERSION" "libonnxruntime.so.$ORT_VERSION"
+fetch_lib "pyorbbecsdk2==$ORBBEC_WHEEL_VERSION" "pyorbbecsdk/libOrbbecSDK.so.$ORBBEC_SDK_VERSION" "libOrbbecSDK.so.$ORBBEC_SDK_VERSION"
 ln -sf "libmujoco.so.$MUJOCO_VERSION" "$LIB/libmujoco.so"
 ln -sf "libonnxruntime.so.$ORT_VERSION" "$LIB/libonnxruntime.so"
+ln -sf "libOrbbecSDK.so.$ORBBEC_SDK_VERSION" "$LIB/libOrbbecSDK.so"
 
 # --- Python venv with the test peers --------------------------------------------------------
 VENV="$ROOT/.venv"

@@ -1,1 +1,23 @@
-//! (being built: see the issues)
+//! The studio light and the trigger box on serial lines.
+//!
+//! - [`dmx`]: DMX512 through an Enttec DMX USB Pro widget ([`DmxLight`], a [`hitl_hal::Light`]);
+//! - [`trigger_box`]: the project's microcontroller trigger box ([`TriggerBox`]: camera trigger
+//!   and light strobe lines, light level, e-stop and door inputs), protocol in [`protocol`] and
+//!   docs/trigger-box-protocol.md;
+//! - [`spec`]: the `--light sim|dmx:DEV|trigger:DEV|none` choice ([`LightSpec`]);
+//! - [`fault`]: the drivers' error type and sticky lock-free health flag.
+//!
+//! Every driver here is a tick-side handle that only touches atomics and lock-free queues, plus a
+//! tokio task that owns the port. See docs/lights.md.
+
+pub mod dmx;
+pub mod fault;
+pub mod protocol;
+pub mod serial;
+pub mod spec;
+pub mod trigger_box;
+
+pub use dmx::{DmxConfig, DmxLight, DmxResolution};
+pub use fault::{Fault, SerialError};
+pub use spec::LightSpec;
+pub use trigger_box::{TriggerBox, TriggerBoxConfig};

@@ -1,0 +1,99 @@
+//! `--light sim|dmx:DEV[,addr=N][,16bit]|trigger:DEV|none`: which light drives the Sun.
+
+use std::fmt;
+use std::str::FromStr;
+
+use super::dmx::{DmxConfig, DmxResolution, UNIVERSE};
+
+/// The light chosen on the command line.
+#[derive(Debug, Clone, PartialEq)]
+pub enum LightSpec {
+    /// The stub's simulated light.
+    Sim,
+    /// A DMX light on an Enttec DMX USB Pro at `port`.
+    Dmx { port: String, config: DmxConfig },
+    /// The light wired to the trigger box at `port`.
+    Trigger { port: String },
+    /// No light: level changes are ignored.
+    None,
+}
+
+/// Why a `--light` value was refused.
+#[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
+#[error(
+    "--light {value:?}: {reason} (expected sim, none, dmx:DEV[,addr=N][,16bit] or trigger:DEV)"
+)]
+pub struct LightSpecError {
+    pub value: String,
+    pub reason: String,
+}
+
+impl FromStr for LightSpec {
+    type Err = LightSpecError;
+
+    fn from_str(s: &str) -> Result<Self, Self::Err> {
+        let err = |reason: String| LightSpecError { value: s.to_string(), reason };
+        match s {
+            "sim" => return Ok(LightSpec::Sim),
+            "none" => return Ok(LightSpec::None),
+            _ => {}
+        }
+        let (kind, rest) = s.split_once(':').ok_or_else(|| err("unknown light".into()))?;
+        match kind {
+            "dmx" => {
+                let mut parts = rest.split(',');
+                let port = parts.next().unwrap_or_default();
+                if port.is_empty() {
+                    return Err(err("missing serial device after dmx:".into()));
+                }
+                let mut config = DmxConfig::default();
+                for opt in parts {
+                    if opt == "16bit" {
+                        config.resolution = DmxResolution::Bits16;
+                    } else if opt == "8bit" {
+                        config.resolution = DmxResolution::Bits8;
+                    } else if let Some(v) = opt.strip_prefix("addr=") {
+                        config.start_address = v
+                            .parse::<u16>()
+                            .ok()
+                            .filter(|a| (1..=UNIVERSE).contains(a))
+                            .ok_or_else(|| err(format!("DMX address {v:?} is not in 1..=512")))?;
+                    } else {
+                        return Err(err(format!(
+                            "unknown DMX option {opt:?} (addr=N, 8bit, 16bit)"
+                        )));
+                    }
+                }
+                config.validate().map_err(|e| err(e.message().to_string()))?;
+                Ok(LightSpec::Dmx { port: port.to_string(), config })
+            }
+            "trigger" => {
+                if rest.is_empty() {
+                    return Err(err("missing serial device after trigger:".into()));
+                }
+                Ok(LightSpec::Trigger { port: rest.to_string() })
+            }
+            other => Err(err(format!("unknown light kind {other:?}"))),
+        }
+    }
+}
+
+impl fmt::Display for LightSpec {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        match self {
+            LightSpec::Sim => f.write_str("sim"),
+            LightSpec::None => f.write_str("none"),
+            LightSpec::Trigger { port } => write!(f, "trigger:{port}"),
+            LightSpec::Dmx { port, config } => {
+                write!(f, "dmx:{port}")?;
+                if config.start_address != 1 {
+                    write!(f, ",addr={}", config.start_address)?;
+                }
+                if config.resolution == DmxResolution::Bits16 {
+                    f.write_str(",16bit")?;
+                }
+                Ok(())
+            }
+        }
+    }
+}

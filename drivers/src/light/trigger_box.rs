@@ -1,0 +1,380 @@
+//! The microcontroller trigger box on a serial line: camera trigger and light strobe lines,
+//! a dimmable light output, and the enclosure's safety inputs (e-stop, door).
+//!
+//! Protocol: docs/trigger-box-protocol.md, codec in [`super::protocol`]. The tick-side handle
+//! ([`TriggerBox`], cheap to clone) only touches atomics and lock-free queues; a tokio task owns
+//! the port, writes queued commands, matches acknowledgements to fires, keeps the latest input
+//! report, and enforces the deadlines (acknowledgement, input staleness, write). Any fault
+//! (garbage, over-long line, unexpected ack, `E` line, timeout, hang-up) is sticky and returned by
+//! the next call from the tick.
+
+use std::collections::VecDeque;
+use std::sync::atomic::{AtomicBool, AtomicU32, AtomicU64, AtomicU8, Ordering};
+use std::sync::Arc;
+use std::time::Duration;
+
+use crossbeam_queue::ArrayQueue;
+use hitl_hal::{
+    Clock, ErrorKind, ErrorType, FireReport, InputState, Inputs, Light, MonotonicClock, Trigger,
+    TriggerLines,
+};
+use tokio::io::AsyncReadExt;
+use tokio::task::JoinHandle;
+
+use super::fault::{Fault, Health, SerialError};
+use super::protocol::{
+    format_command, level_permille, parse_line, BoxLine, Command, LineBuffer, Pushed,
+};
+use super::serial::{check_level, classify_io, open_port, write_within};
+
+/// Settings of a trigger box.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct TriggerBoxConfig {
+    pub baud: u32,
+    /// A command not acknowledged within this is a fault.
+    pub ack_timeout: Duration,
+    /// Input reports older than this are a fault (the box sends them at least every 50 ms).
+    pub inputs_stale_after: Duration,
+    /// How often the task looks at the command queue and the deadlines.
+    pub poll: Duration,
+    pub write_timeout: Duration,
+    /// `open` waits this long for the ping's ack and the first input report.
+    pub open_timeout: Duration,
+    /// Commands that may wait for the port (and acks that may be outstanding).
+    pub queue: usize,
+}
+
+impl Default for TriggerBoxConfig {
+    fn default() -> Self {
+        Self {
+            baud: 115_200,
+            ack_timeout: Duration::from_millis(50),
+            inputs_stale_after: Duration::from_millis(200),
+            poll: Duration::from_millis(1),
+            write_timeout: Duration::from_millis(50),
+            open_timeout: Duration::from_secs(1),
+            queue: 32,
+        }
+    }
+}
+
+const INPUT_VALID: u8 = 1;
+const INPUT_ESTOP: u8 = 2;
+const INPUT_DOOR: u8 = 4;
+const LEVEL_UNSET: u32 = u32::MAX;
+
+struct Shared {
+    health: Health,
+    clock: MonotonicClock,
+    stale_ns: u64,
+    commands: ArrayQueue<Command>,
+    fired: ArrayQueue<FireReport>,
+    /// Fire reports dropped because the tick did not poll them in time.
+    fired_dropped: AtomicU64,
+    inputs: AtomicU8,
+    inputs_at_ns: AtomicU64,
+    /// Latest steady level asked for, permille, or `LEVEL_UNSET`.
+    level: AtomicU32,
+    ping_acked: AtomicBool,
+}
+
+impl Shared {
+    fn inputs_fresh(&self, now_ns: u64) -> bool {
+        let bits = self.inputs.load(Ordering::Acquire);
+        bits & INPUT_VALID != 0
+            && now_ns.saturating_sub(self.inputs_at_ns.load(Ordering::Acquire)) <= self.stale_ns
+    }
+}
+
+struct TaskGuard(JoinHandle<()>);
+
+impl Drop for TaskGuard {
+    fn drop(&mut self) {
+        self.0.abort();
+    }
+}
+
+/// Handle to a trigger box: [`Trigger`], [`Inputs`] and [`Light`] (steady level through `L`,
+/// flashes through `S`). Clones share one port; the task stops when the last clone is dropped.
+#[derive(Clone)]
+pub struct TriggerBox {
+    shared: Arc<Shared>,
+    _task: Arc<TaskGuard>,
+}
+
+impl TriggerBox {
+    /// Open the box at `path`, check it answers a ping and reports its inputs within
+    /// `open_timeout`. Stamps use `clock` (the controller's). Must run inside a tokio runtime.
+    pub async fn open(
+        path: &str,
+        config: TriggerBoxConfig,
+        clock: MonotonicClock,
+    ) -> Result<Self, SerialError> {
+        if config.queue == 0 || config.poll.is_zero() || config.ack_timeout.is_zero() {
+            return Err(SerialError::new(
+                ErrorKind::InvalidRequest,
+                "trigger box: queue, poll period and ack timeout must be positive",
+            ));
+        }
+        let port = open_port(path, config.baud, "trigger box")?;
+        let shared = Arc::new(Shared {
+            health: Health::new(),
+            clock,
+            stale_ns: u64::try_from(config.inputs_stale_after.as_nanos()).unwrap_or(u64::MAX),
+            commands: ArrayQueue::new(config.queue),
+            fired: ArrayQueue::new(config.queue.max(64)),
+            fired_dropped: AtomicU64::new(0),
+            inputs: AtomicU8::new(0),
+            inputs_at_ns: AtomicU64::new(0),
+            level: AtomicU32::new(LEVEL_UNSET),
+            ping_acked: AtomicBool::new(false),
+        });
+        let _ = shared.commands.push(Command::Ping);
+        let task = tokio::spawn(box_task(port, config, Arc::clone(&shared)));
+        let tb = Self { shared, _task: Arc::new(TaskGuard(task)) };
+        let deadline = tokio::time::Instant::now() + config.open_timeout;
+        loop {
+            if let Some(f) = tb.shared.health.fault() {
+                return Err(SerialError::new(
+                    f.kind(),
+                    format!("trigger box on {path}: {} while opening", f.message()),
+                ));
+            }
+            let now = tb.shared.clock.now_ns();
+            if tb.shared.ping_acked.load(Ordering::Acquire) && tb.shared.inputs_fresh(now) {
+                return Ok(tb);
+            }
+            if tokio::time::Instant::now() >= deadline {
+                return Err(SerialError::new(
+                    ErrorKind::Timeout,
+                    format!(
+                        "trigger box on {path}: no ping acknowledgement and input report within {} ms",
+                        config.open_timeout.as_millis()
+                    ),
+                ));
+            }
+            tokio::time::sleep(Duration::from_millis(1)).await;
+        }
+    }
+
+    /// The fault the driver tripped on, if any.
+    pub fn fault(&self) -> Option<Fault> {
+        self.shared.health.fault()
+    }
+
+    /// Fire reports dropped because nobody polled them.
+    pub fn fired_dropped(&self) -> u64 {
+        self.shared.fired_dropped.load(Ordering::Relaxed)
+    }
+
+    fn queue(&self, cmd: Command) -> Result<(), SerialError> {
+        self.shared.health.check()?;
+        if self.shared.commands.push(cmd).is_err() {
+            self.shared.health.trip(Fault::QueueFull);
+            return Err(Fault::QueueFull.into());
+        }
+        Ok(())
+    }
+}
+
+impl ErrorType for TriggerBox {
+    type Error = SerialError;
+}
+
+impl Trigger for TriggerBox {
+    fn fire(&mut self, tick: u64, lines: TriggerLines) -> Result<(), SerialError> {
+        if !lines.camera && !lines.light {
+            return Err(SerialError::new(ErrorKind::InvalidRequest, "fire with no lines selected"));
+        }
+        self.queue(Command::Fire { tick, lines })
+    }
+
+    fn poll_fired(&mut self) -> Result<Option<FireReport>, SerialError> {
+        // Deliver acks that arrived before a fault; then report the fault.
+        if let Some(r) = self.shared.fired.pop() {
+            return Ok(Some(r));
+        }
+        self.shared.health.check()?;
+        Ok(None)
+    }
+}
+
+impl Inputs for TriggerBox {
+    fn read(&mut self) -> Result<InputState, SerialError> {
+        self.shared.health.check()?;
+        if !self.shared.inputs_fresh(self.shared.clock.now_ns()) {
+            self.shared.health.trip(Fault::InputsStale);
+            return Err(Fault::InputsStale.into());
+        }
+        let bits = self.shared.inputs.load(Ordering::Acquire);
+        Ok(InputState { estop_pressed: bits & INPUT_ESTOP != 0, door_open: bits & INPUT_DOOR != 0 })
+    }
+}
+
+impl Light for TriggerBox {
+    fn set_level(&mut self, level: f32) -> Result<(), SerialError> {
+        self.shared.health.check()?;
+        check_level(level)?;
+        self.shared.level.store(u32::from(level_permille(level)), Ordering::Release);
+        Ok(())
+    }
+
+    fn strobe(&mut self, level: f32, duration_us: u32) -> Result<(), SerialError> {
+        check_level(level)?;
+        if duration_us == 0 {
+            return Err(SerialError::new(
+                ErrorKind::InvalidRequest,
+                "strobe duration must be positive",
+            ));
+        }
+        self.queue(Command::Strobe { permille: level_permille(level), duration_us })
+    }
+}
+
+/// A command written and waiting for its `A`.
+struct Pending {
+    seq: u32,
+    fire_tick: Option<u64>,
+    is_ping: bool,
+    deadline_ns: u64,
+}
+
+struct BoxTask {
+    config: TriggerBoxConfig,
+    shared: Arc<Shared>,
+    pending: VecDeque<Pending>,
+    next_seq: u32,
+    sent_level: u32,
+}
+
+impl BoxTask {
+    fn seq(&mut self) -> u32 {
+        let s = self.next_seq;
+        self.next_seq = self.next_seq.checked_add(1).unwrap_or(1);
+        s
+    }
+
+    fn on_line(&mut self, line: &[u8]) -> Result<(), Fault> {
+        let now = self.shared.clock.now_ns();
+        match parse_line(line).map_err(|_| Fault::Garbage)? {
+            BoxLine::Ack { seq, device_us } => {
+                let i =
+                    self.pending.iter().position(|p| p.seq == seq).ok_or(Fault::UnexpectedAck)?;
+                let p = self.pending.remove(i).ok_or(Fault::UnexpectedAck)?;
+                if p.is_ping {
+                    self.shared.ping_acked.store(true, Ordering::Release);
+                }
+                if let Some(tick) = p.fire_tick {
+                    let report = FireReport { tick, device_us, acked_ns: now };
+                    if self.shared.fired.force_push(report).is_some() {
+                        self.shared.fired_dropped.fetch_add(1, Ordering::Relaxed);
+                    }
+                }
+            }
+            BoxLine::Inputs { estop_pressed, door_open, .. } => {
+                let bits = INPUT_VALID
+                    | if estop_pressed { INPUT_ESTOP } else { 0 }
+                    | if door_open { INPUT_DOOR } else { 0 };
+                self.shared.inputs.store(bits, Ordering::Release);
+                self.shared.inputs_at_ns.store(now, Ordering::Release);
+            }
+            BoxLine::Error { .. } => return Err(Fault::BoxError),
+        }
+        Ok(())
+    }
+
+    async fn write_command<W>(&mut self, w: &mut W, cmd: Command) -> Result<(), Fault>
+    where
+        W: tokio::io::AsyncWrite + Unpin,
+    {
+        if self.pending.len() >= self.config.queue {
+            return Err(Fault::QueueFull);
+        }
+        let seq = self.seq();
+        let line = format_command(seq, cmd);
+        write_within(w, line.as_bytes(), self.config.write_timeout).await?;
+        let ack_ns = u64::try_from(self.config.ack_timeout.as_nanos()).unwrap_or(u64::MAX);
+        self.pending.push_back(Pending {
+            seq,
+            fire_tick: match cmd {
+                Command::Fire { tick, .. } => Some(tick),
+                _ => None,
+            },
+            is_ping: cmd == Command::Ping,
+            deadline_ns: self.shared.clock.now_ns().saturating_add(ack_ns),
+        });
+        Ok(())
+    }
+
+    /// Write queued commands and a changed level; check deadlines.
+    async fn service<W>(&mut self, w: &mut W) -> Result<(), Fault>
+    where
+        W: tokio::io::AsyncWrite + Unpin,
+    {
+        while let Some(cmd) = self.shared.commands.pop() {
+            self.write_command(w, cmd).await?;
+        }
+        let level = self.shared.level.load(Ordering::Acquire);
+        if level != LEVEL_UNSET && level != self.sent_level {
+            let permille = u16::try_from(level).unwrap_or(1000);
+            self.write_command(w, Command::Level { permille }).await?;
+            self.sent_level = level;
+        }
+        let now = self.shared.clock.now_ns();
+        if self.pending.front().is_some_and(|p| now > p.deadline_ns) {
+            return Err(Fault::AckTimeout);
+        }
+        // Staleness counts only once the box has reported at least once (open waits for that).
+        if self.shared.inputs.load(Ordering::Acquire) & INPUT_VALID != 0
+            && !self.shared.inputs_fresh(now)
+        {
+            return Err(Fault::InputsStale);
+        }
+        Ok(())
+    }
+}
+
+async fn box_task(port: tokio_serial::SerialStream, config: TriggerBoxConfig, shared: Arc<Shared>) {
+    let (mut rd, mut wr) = tokio::io::split(port);
+    let mut task = BoxTask {
+        config,
+        shared: Arc::clone(&shared),
+        pending: VecDeque::with_capacity(config.queue),
+        next_seq: 1,
+        sent_level: LEVEL_UNSET,
+    };
+    let mut lines = LineBuffer::new();
+    let mut chunk = [0u8; 256];
+    let mut poll = tokio::time::interval(config.poll);
+    poll.set_missed_tick_behavior(tokio::time::MissedTickBehavior::Delay);
+    let result: Result<(), Fault> = loop {
+        tokio::select! {
+            r = rd.read(&mut chunk) => {
+                let n = match r {
+                    Ok(0) => break Err(Fault::Unplugged),
+                    Ok(n) => n,
+                    Err(e) => break Err(classify_io(&e)),
+                };
+                let mut res = Ok(());
+                for &b in &chunk[..n] {
+                    match lines.push(b) {
+                        Pushed::Partial => {}
+                        Pushed::TooLong => { res = Err(Fault::LineTooLong); break; }
+                        Pushed::Line(l) => {
+                            let r = task.on_line(l);
+                            lines.clear();
+                            if r.is_err() { res = r; break; }
+                        }
+                    }
+                }
+                if let Err(f) = res { break Err(f); }
+            }
+            _ = poll.tick() => {
+                if let Err(f) = task.service(&mut wr).await { break Err(f); }
+            }
+        }
+    };
+    if let Err(f) = result {
+        shared.health.trip(f);
+    }
+}

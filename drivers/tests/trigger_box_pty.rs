@@ -1,0 +1,290 @@
+//! The trigger-box driver against a pty peer that plays the box: fires acknowledged with device
+//! timestamps, input reports, light commands, and garbage / silence / unplug as faults.
+
+#![allow(clippy::unwrap_used)]
+
+mod light_pty;
+
+use std::sync::atomic::{AtomicBool, Ordering};
+use std::sync::{Arc, Mutex};
+use std::thread::JoinHandle;
+use std::time::Duration;
+
+use hitl_drivers::light::{TriggerBox, TriggerBoxConfig};
+use hitl_hal::{Error, ErrorKind, Inputs, Light, MonotonicClock, Trigger, TriggerLines};
+use light_pty::{eventually, PtyPeer};
+
+/// What the simulated box does; tests flip these while it runs.
+#[derive(Default)]
+struct Behaviour {
+    ack_fires: AtomicBool,
+    ack_other: AtomicBool,
+    send_inputs: AtomicBool,
+    estop: AtomicBool,
+    door: AtomicBool,
+    unplug: AtomicBool,
+    stop: AtomicBool,
+    /// Raw bytes to send once.
+    inject: Mutex<Vec<u8>>,
+    /// Lines received from the host.
+    received: Mutex<Vec<String>>,
+}
+
+/// Device time the box reports for command `seq`: recognisable, so the test can check it came through.
+fn device_us_for(seq: u32) -> u64 {
+    1_000_000 + u64::from(seq) * 1000 + 7
+}
+
+struct BoxPeer {
+    path: String,
+    b: Arc<Behaviour>,
+    thread: Option<JoinHandle<()>>,
+}
+
+impl BoxPeer {
+    fn start() -> Self {
+        let b = Arc::new(Behaviour::default());
+        b.ack_fires.store(true, Ordering::SeqCst);
+        b.ack_other.store(true, Ordering::SeqCst);
+        b.send_inputs.store(true, Ordering::SeqCst);
+        let mut pty = PtyPeer::new();
+        let path = pty.path.clone();
+        let bb = Arc::clone(&b);
+        let thread = std::thread::spawn(move || {
+            let mut line = Vec::new();
+            let mut buf = [0u8; 256];
+            let mut last_inputs = std::time::Instant::now() - Duration::from_secs(1);
+            let t0 = std::time::Instant::now();
+            while !bb.stop.load(Ordering::SeqCst) {
+                if bb.unplug.load(Ordering::SeqCst) {
+                    return; // drops the master: the host sees a hang-up
+                }
+                let inject = std::mem::take(&mut *bb.inject.lock().unwrap());
+                if !inject.is_empty() {
+                    pty.write(&inject);
+                }
+                if bb.send_inputs.load(Ordering::SeqCst)
+                    && last_inputs.elapsed() >= Duration::from_millis(20)
+                {
+                    let us = t0.elapsed().as_micros();
+                    let e = u8::from(bb.estop.load(Ordering::SeqCst));
+                    let d = u8::from(bb.door.load(Ordering::SeqCst));
+                    pty.write(format!("I {us} {e} {d}\n").as_bytes());
+                    last_inputs = std::time::Instant::now();
+                }
+                let n = pty.try_read(&mut buf);
+                for &c in &buf[..n] {
+                    if c != b'\n' {
+                        line.push(c);
+                        continue;
+                    }
+                    let text = String::from_utf8(std::mem::take(&mut line)).unwrap();
+                    let mut f = text.split(' ');
+                    let kind = f.next().unwrap_or_default().to_string();
+                    let seq: u32 = f.next().and_then(|s| s.parse().ok()).unwrap_or(0);
+                    bb.received.lock().unwrap().push(text);
+                    let ack = if kind == "F" {
+                        bb.ack_fires.load(Ordering::SeqCst)
+                    } else {
+                        bb.ack_other.load(Ordering::SeqCst)
+                    };
+                    if ack {
+                        pty.write(format!("A {seq} {}\n", device_us_for(seq)).as_bytes());
+                    }
+                }
+            }
+        });
+        Self { path, b, thread: Some(thread) }
+    }
+
+    fn received(&self) -> Vec<String> {
+        self.b.received.lock().unwrap().clone()
+    }
+
+    fn inject(&self, bytes: &[u8]) {
+        self.b.inject.lock().unwrap().extend_from_slice(bytes);
+    }
+}
+
+impl Drop for BoxPeer {
+    fn drop(&mut self) {
+        self.b.stop.store(true, Ordering::SeqCst);
+        if let Some(t) = self.thread.take() {
+            let _ = t.join();
+        }
+    }
+}
+
+fn config() -> TriggerBoxConfig {
+    TriggerBoxConfig { ack_timeout: Duration::from_millis(100), ..TriggerBoxConfig::default() }
+}
+
+async fn open(peer: &BoxPeer) -> TriggerBox {
+    TriggerBox::open(&peer.path, config(), MonotonicClock::new()).await.expect("open trigger box")
+}
+
+const BOTH: TriggerLines = TriggerLines { camera: true, light: true };
+const CAMERA: TriggerLines = TriggerLines { camera: true, light: false };
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn fires_are_acknowledged_with_device_timestamps() {
+    let peer = BoxPeer::start();
+    let mut tb = open(&peer).await;
+    assert_eq!(peer.received().first().map(String::as_str), Some("P 1"), "open pings first");
+
+    tb.fire(7, BOTH).expect("fire");
+    let r = eventually(Duration::from_secs(2), || tb.poll_fired().expect("no fault"))
+        .await
+        .expect("ack");
+    assert_eq!(r.tick, 7);
+    assert_eq!(r.device_us, device_us_for(2), "the ack's device time of command seq 2");
+    assert!(r.acked_ns > 0);
+    assert!(peer.received().contains(&"F 2 7 3".to_string()), "{:?}", peer.received());
+
+    tb.fire(8, CAMERA).expect("fire");
+    let r = eventually(Duration::from_secs(2), || tb.poll_fired().expect("no fault"))
+        .await
+        .expect("ack");
+    assert_eq!((r.tick, r.device_us), (8, device_us_for(3)));
+    assert!(peer.received().contains(&"F 3 8 1".to_string()), "{:?}", peer.received());
+    assert_eq!(tb.poll_fired().expect("no fault"), None);
+
+    let e = tb.fire(9, TriggerLines::default()).unwrap_err();
+    assert_eq!(e.kind(), ErrorKind::InvalidRequest);
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn inputs_follow_the_box_reports() {
+    let peer = BoxPeer::start();
+    let mut tb = open(&peer).await;
+    let s = tb.read().expect("inputs");
+    assert!(!s.estop_pressed && !s.door_open);
+    peer.b.estop.store(true, Ordering::SeqCst);
+    eventually(Duration::from_secs(2), || tb.read().expect("inputs").estop_pressed.then_some(()))
+        .await
+        .expect("e-stop press seen");
+    peer.b.door.store(true, Ordering::SeqCst);
+    peer.b.estop.store(false, Ordering::SeqCst);
+    let s = eventually(Duration::from_secs(2), || {
+        let s = tb.read().expect("inputs");
+        (s.door_open && !s.estop_pressed).then_some(s)
+    })
+    .await
+    .expect("door open seen");
+    assert!(s.door_open);
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn light_level_and_strobe_become_commands() {
+    let peer = BoxPeer::start();
+    let mut tb = open(&peer).await;
+    tb.set_level(0.5).expect("level");
+    tb.set_level(0.25).expect("level");
+    tb.strobe(1.0, 2000).expect("strobe");
+    let lines = eventually(Duration::from_secs(2), || {
+        let r = peer.received();
+        r.iter().any(|l| l.starts_with("S ")).then_some(r)
+    })
+    .await
+    .expect("strobe sent");
+    let levels: Vec<&str> = lines
+        .iter()
+        .filter(|l| l.starts_with("L "))
+        .map(|l| l.rsplit(' ').next().unwrap())
+        .collect();
+    assert_eq!(levels.last(), Some(&"250"), "latest level wins: {lines:?}");
+    let strobe = lines.iter().find(|l| l.starts_with("S ")).unwrap();
+    assert!(strobe.ends_with(" 1000 2000"), "{strobe}");
+    // The level is sent once, not on every poll.
+    tokio::time::sleep(Duration::from_millis(50)).await;
+    assert_eq!(peer.received().iter().filter(|l| l.ends_with(" 250")).count(), 1);
+    assert!(tb.fault().is_none());
+}
+
+async fn expect_fault(tb: &mut TriggerBox, kind: ErrorKind) -> String {
+    let e = eventually(Duration::from_secs(3), || tb.fire(1, CAMERA).err())
+        .await
+        .unwrap_or_else(|| panic!("expected a {kind} fault"));
+    assert_eq!(e.kind(), kind, "{e}");
+    // Sticky: every later call reports it too.
+    assert_eq!(tb.read().unwrap_err().kind(), kind);
+    assert_eq!(tb.poll_fired().unwrap_err().kind(), kind);
+    e.to_string()
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn garbage_line_is_a_protocol_fault() {
+    let peer = BoxPeer::start();
+    let mut tb = open(&peer).await;
+    peer.inject(b"hello there\n");
+    let msg = expect_fault(&mut tb, ErrorKind::Protocol).await;
+    assert!(msg.contains("not part of the protocol"), "{msg}");
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn over_long_line_is_a_protocol_fault() {
+    let peer = BoxPeer::start();
+    let mut tb = open(&peer).await;
+    peer.inject(&[b'7'; 500]);
+    let msg = expect_fault(&mut tb, ErrorKind::Protocol).await;
+    assert!(msg.contains("over-long"), "{msg}");
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn ack_for_an_unsent_command_is_a_protocol_fault() {
+    let peer = BoxPeer::start();
+    let mut tb = open(&peer).await;
+    peer.inject(b"A 999 5\n");
+    expect_fault(&mut tb, ErrorKind::Protocol).await;
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn box_error_line_is_a_device_fault() {
+    let peer = BoxPeer::start();
+    let mut tb = open(&peer).await;
+    peer.inject(b"E 0 4\n");
+    expect_fault(&mut tb, ErrorKind::DeviceFault).await;
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn missing_ack_is_a_timeout() {
+    let peer = BoxPeer::start();
+    let mut tb = open(&peer).await;
+    peer.b.ack_fires.store(false, Ordering::SeqCst);
+    tb.fire(3, CAMERA).expect("fire queued");
+    let msg = expect_fault(&mut tb, ErrorKind::Timeout).await;
+    assert!(msg.contains("acknowledge"), "{msg}");
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn stale_inputs_are_a_timeout() {
+    let peer = BoxPeer::start();
+    let mut tb = open(&peer).await;
+    tb.read().expect("fresh at first");
+    peer.b.send_inputs.store(false, Ordering::SeqCst);
+    let e = eventually(Duration::from_secs(3), || tb.read().err()).await.expect("stale inputs");
+    assert_eq!(e.kind(), ErrorKind::Timeout, "{e}");
+    assert!(e.to_string().contains("stale"), "{e}");
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn unplug_is_disconnected() {
+    let peer = BoxPeer::start();
+    let mut tb = open(&peer).await;
+    peer.b.unplug.store(true, Ordering::SeqCst);
+    let msg = expect_fault(&mut tb, ErrorKind::Disconnected).await;
+    assert!(msg.contains("unplugged"), "{msg}");
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn a_silent_box_fails_to_open_naming_the_port() {
+    let peer = BoxPeer::start();
+    peer.b.ack_other.store(false, Ordering::SeqCst);
+    peer.b.send_inputs.store(false, Ordering::SeqCst);
+    let cfg = TriggerBoxConfig { open_timeout: Duration::from_millis(300), ..config() };
+    let Err(e) = TriggerBox::open(&peer.path, cfg, MonotonicClock::new()).await else {
+        panic!("a silent box must not open");
+    };
+    assert!(matches!(e.kind(), ErrorKind::Timeout), "{e}");
+    assert!(e.to_string().contains(&peer.path), "{e}");
+}
