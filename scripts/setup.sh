@@ -55,9 +55,13 @@ PY
 fetch_lib "mujoco==$MUJOCO_VERSION" "mujoco/libmujoco.so.$MUJOCO_VERSION" "libmujoco.so.$MUJOCO_VERSION"
 fetch_lib "onnxruntime==$ORT_VERSION" "onnxruntime/capi/libonnxruntime.so.$ORT_VERSION" "libonnxruntime.so.$ORT_VERSION"
 fetch_lib "pyorbbecsdk2==$ORBBEC_WHEEL_VERSION" "pyorbbecsdk/libOrbbecSDK.so.$ORBBEC_SDK_VERSION" "libOrbbecSDK.so.$ORBBEC_SDK_VERSION"
+# The SDK's Gemini 305 support uses its frame-processor extension (extensions/ beside the library).
+mkdir -p "$LIB/extensions/frameprocessor"
+fetch_lib "pyorbbecsdk2==$ORBBEC_WHEEL_VERSION" "pyorbbecsdk/extensions/frameprocessor/libob_frame_processor.so" "extensions/frameprocessor/libob_frame_processor.so"
 ln -sf "libmujoco.so.$MUJOCO_VERSION" "$LIB/libmujoco.so"
 ln -sf "libonnxruntime.so.$ORT_VERSION" "$LIB/libonnxruntime.so"
 ln -sf "libOrbbecSDK.so.$ORBBEC_SDK_VERSION" "$LIB/libOrbbecSDK.so"
+ln -sf "libOrbbecSDK.so.$ORBBEC_SDK_VERSION" "$LIB/libOrbbecSDK.so.2"
 
 # --- Python venv with the test peers --------------------------------------------------------
 VENV="$ROOT/.venv"
