@@ -86,10 +86,11 @@ async fn the_universe_is_refreshed_without_changes() {
     let mut light = DmxLight::open(&peer.path, fast()).await.expect("open DMX light");
     light.set_level(0.2).expect("set");
     wait_frame(&mut peer, Duration::from_secs(2), |f| f.channels[0] == 51);
-    // Nothing changes for 300 ms; at a 20 ms refresh at least 5 more frames must come.
+    // Nothing changes for 300 ms; at a 20 ms refresh about 15 more frames come (at least 3 even
+    // on a loaded machine).
     let bytes = peer.read_some(usize::MAX, Duration::from_millis(300));
     let (frames, _) = parse_frames(&bytes);
-    assert!(frames.len() >= 5, "only {} refresh frames in 300 ms", frames.len());
+    assert!(frames.len() >= 3, "only {} refresh frames in 300 ms", frames.len());
     assert!(frames.iter().all(|f| f.channels[0] == 51));
 }
 

@@ -5,13 +5,14 @@
 
 mod light_pty;
 
+use std::collections::HashMap;
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::{Arc, Mutex};
 use std::thread::JoinHandle;
 use std::time::Duration;
 
 use hitl_drivers::light::{TriggerBox, TriggerBoxConfig};
-use hitl_hal::{Error, ErrorKind, Inputs, Light, MonotonicClock, Trigger, TriggerLines};
+use hitl_hal::{Clock, Error, ErrorKind, Inputs, Light, MonotonicClock, Trigger, TriggerLines};
 use light_pty::{eventually, PtyPeer};
 
 /// What the simulated box does; tests flip these while it runs.
@@ -28,12 +29,12 @@ struct Behaviour {
     inject: Mutex<Vec<u8>>,
     /// Lines received from the host.
     received: Mutex<Vec<String>>,
+    /// The device time sent in the ack of each seq.
+    acked: Mutex<HashMap<u32, u64>>,
 }
 
-/// Device time the box reports for command `seq`: recognisable, so the test can check it came through.
-fn device_us_for(seq: u32) -> u64 {
-    1_000_000 + u64::from(seq) * 1000 + 7
-}
+/// The box's clock: microseconds since the peer started, plus 5 s (a clock of its own).
+const DEVICE_EPOCH_US: u128 = 5_000_000;
 
 struct BoxPeer {
     path: String,
@@ -89,12 +90,19 @@ impl BoxPeer {
                         bb.ack_other.load(Ordering::SeqCst)
                     };
                     if ack {
-                        pty.write(format!("A {seq} {}\n", device_us_for(seq)).as_bytes());
+                        let device_us = u64::try_from(t0.elapsed().as_micros() + DEVICE_EPOCH_US)
+                            .unwrap_or(u64::MAX);
+                        bb.acked.lock().unwrap().insert(seq, device_us);
+                        pty.write(format!("A {seq} {device_us}\n").as_bytes());
                     }
                 }
             }
         });
         Self { path, b, thread: Some(thread) }
+    }
+
+    fn acked(&self, seq: u32) -> Option<u64> {
+        self.b.acked.lock().unwrap().get(&seq).copied()
     }
 
     fn received(&self) -> Vec<String> {
@@ -116,7 +124,12 @@ impl Drop for BoxPeer {
 }
 
 fn config() -> TriggerBoxConfig {
-    TriggerBoxConfig { ack_timeout: Duration::from_millis(100), ..TriggerBoxConfig::default() }
+    // Deadlines with room for a loaded CI machine; the fault tests wait up to 3 s.
+    TriggerBoxConfig {
+        ack_timeout: Duration::from_millis(300),
+        inputs_stale_after: Duration::from_millis(500),
+        ..TriggerBoxConfig::default()
+    }
 }
 
 async fn open(peer: &BoxPeer) -> TriggerBox {
@@ -129,23 +142,33 @@ const CAMERA: TriggerLines = TriggerLines { camera: true, light: false };
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn fires_are_acknowledged_with_device_timestamps() {
     let peer = BoxPeer::start();
-    let mut tb = open(&peer).await;
+    let clock = MonotonicClock::new();
+    let mut tb = TriggerBox::open(&peer.path, config(), clock).await.expect("open trigger box");
     assert_eq!(peer.received().first().map(String::as_str), Some("P 1"), "open pings first");
 
+    let fired_ns = clock.now_ns();
     tb.fire(7, BOTH).expect("fire");
     let r = eventually(Duration::from_secs(2), || tb.poll_fired().expect("no fault"))
         .await
         .expect("ack");
     assert_eq!(r.tick, 7);
-    assert_eq!(r.device_us, device_us_for(2), "the ack's device time of command seq 2");
-    assert!(r.acked_ns > 0);
+    assert_eq!(Some(r.device_us), peer.acked(2), "the ack's device time of command seq 2");
+    assert!(r.acked_ns > fired_ns);
+    // The box's time maps onto the host clock between the fire call and the ack's arrival.
+    let host = tb.device_to_host_ns(r.device_us).expect("offset estimated from acks");
+    let slack = tb.clock_uncertainty_ns().expect("uncertainty") + 2_000_000;
+    assert!(
+        host + slack >= fired_ns && host <= r.acked_ns + slack,
+        "mapped {host} outside [{fired_ns}, {}] +- {slack}",
+        r.acked_ns
+    );
     assert!(peer.received().contains(&"F 2 7 3".to_string()), "{:?}", peer.received());
 
     tb.fire(8, CAMERA).expect("fire");
     let r = eventually(Duration::from_secs(2), || tb.poll_fired().expect("no fault"))
         .await
         .expect("ack");
-    assert_eq!((r.tick, r.device_us), (8, device_us_for(3)));
+    assert_eq!((r.tick, Some(r.device_us)), (8, peer.acked(3)));
     assert!(peer.received().contains(&"F 3 8 1".to_string()), "{:?}", peer.received());
     assert_eq!(tb.poll_fired().expect("no fault"), None);
 
@@ -202,12 +225,15 @@ async fn light_level_and_strobe_become_commands() {
 }
 
 async fn expect_fault(tb: &mut TriggerBox, kind: ErrorKind) -> String {
-    let e = eventually(Duration::from_secs(3), || tb.fire(1, CAMERA).err())
+    // Probe without queuing anything (acks that arrived before the fault are drained first).
+    let e = eventually(Duration::from_secs(3), || tb.poll_fired().err())
         .await
         .unwrap_or_else(|| panic!("expected a {kind} fault"));
     assert_eq!(e.kind(), kind, "{e}");
     // Sticky: every later call reports it too.
+    assert_eq!(tb.fire(1, CAMERA).unwrap_err().kind(), kind);
     assert_eq!(tb.read().unwrap_err().kind(), kind);
+    assert_eq!(tb.set_level(0.5).unwrap_err().kind(), kind);
     assert_eq!(tb.poll_fired().unwrap_err().kind(), kind);
     e.to_string()
 }

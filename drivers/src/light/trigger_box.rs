@@ -9,7 +9,7 @@
 //! the next call from the tick.
 
 use std::collections::VecDeque;
-use std::sync::atomic::{AtomicBool, AtomicU32, AtomicU64, AtomicU8, Ordering};
+use std::sync::atomic::{AtomicBool, AtomicI64, AtomicU32, AtomicU64, AtomicU8, Ordering};
 use std::sync::Arc;
 use std::time::Duration;
 
@@ -76,6 +76,10 @@ struct Shared {
     /// Latest steady level asked for, permille, or `LEVEL_UNSET`.
     level: AtomicU32,
     ping_acked: AtomicBool,
+    /// Host ns minus device ns, from the acknowledgement with the shortest round trip lately.
+    offset_ns: AtomicI64,
+    /// That round trip, ns (`u64::MAX`: no estimate yet).
+    offset_rtt_ns: AtomicU64,
 }
 
 impl Shared {
@@ -128,6 +132,8 @@ impl TriggerBox {
             inputs_at_ns: AtomicU64::new(0),
             level: AtomicU32::new(LEVEL_UNSET),
             ping_acked: AtomicBool::new(false),
+            offset_ns: AtomicI64::new(0),
+            offset_rtt_ns: AtomicU64::new(u64::MAX),
         });
         let _ = shared.commands.push(Command::Ping);
         let task = tokio::spawn(box_task(port, config, Arc::clone(&shared)));
@@ -160,6 +166,26 @@ impl TriggerBox {
     /// The fault the driver tripped on, if any.
     pub fn fault(&self) -> Option<Fault> {
         self.shared.health.fault()
+    }
+
+    /// The box's time `device_us` on the controller's clock (ns), from the acknowledgement
+    /// round trips (midpoint of the shortest recent one); `None` before the first ack.
+    pub fn device_to_host_ns(&self, device_us: u64) -> Option<u64> {
+        if self.shared.offset_rtt_ns.load(Ordering::Acquire) == u64::MAX {
+            return None;
+        }
+        let off = self.shared.offset_ns.load(Ordering::Acquire);
+        let host = i128::from(device_us) * 1000 + i128::from(off);
+        Some(u64::try_from(host.max(0)).unwrap_or(u64::MAX))
+    }
+
+    /// Half the round trip of the acknowledgement behind [`TriggerBox::device_to_host_ns`]: the
+    /// bound on its error (ns).
+    pub fn clock_uncertainty_ns(&self) -> Option<u64> {
+        match self.shared.offset_rtt_ns.load(Ordering::Acquire) {
+            u64::MAX => None,
+            rtt => Some(rtt / 2),
+        }
     }
 
     /// Fire reports dropped because nobody polled them.
@@ -236,6 +262,8 @@ struct Pending {
     seq: u32,
     fire_tick: Option<u64>,
     is_ping: bool,
+    /// When the command's last byte was handed to the port.
+    sent_ns: u64,
     deadline_ns: u64,
 }
 
@@ -245,7 +273,13 @@ struct BoxTask {
     pending: VecDeque<Pending>,
     next_seq: u32,
     sent_level: u32,
+    /// When the current clock-offset estimate was made.
+    offset_at_ns: u64,
 }
+
+/// A clock-offset estimate older than this is replaced by the next one, however long its round
+/// trip (the box's crystal drifts against the host's clock).
+const OFFSET_MAX_AGE_NS: u64 = 1_000_000_000;
 
 impl BoxTask {
     fn seq(&mut self) -> u32 {
@@ -261,6 +295,7 @@ impl BoxTask {
                 let i =
                     self.pending.iter().position(|p| p.seq == seq).ok_or(Fault::UnexpectedAck)?;
                 let p = self.pending.remove(i).ok_or(Fault::UnexpectedAck)?;
+                self.update_offset(p.sent_ns, now, device_us);
                 if p.is_ping {
                     self.shared.ping_acked.store(true, Ordering::Release);
                 }
@@ -283,6 +318,20 @@ impl BoxTask {
         Ok(())
     }
 
+    /// Cristian's estimate: the box stamped its ack around the middle of the round trip.
+    fn update_offset(&mut self, sent_ns: u64, acked_ns: u64, device_us: u64) {
+        let rtt = acked_ns.saturating_sub(sent_ns);
+        let best = self.shared.offset_rtt_ns.load(Ordering::Acquire);
+        if rtt <= best || acked_ns.saturating_sub(self.offset_at_ns) > OFFSET_MAX_AGE_NS {
+            let mid = i128::from(sent_ns) + i128::from(rtt / 2);
+            let off = mid - i128::from(device_us) * 1000;
+            let off = i64::try_from(off).unwrap_or(if off < 0 { i64::MIN } else { i64::MAX });
+            self.shared.offset_ns.store(off, Ordering::Release);
+            self.shared.offset_rtt_ns.store(rtt, Ordering::Release);
+            self.offset_at_ns = acked_ns;
+        }
+    }
+
     async fn write_command<W>(&mut self, w: &mut W, cmd: Command) -> Result<(), Fault>
     where
         W: tokio::io::AsyncWrite + Unpin,
@@ -294,6 +343,7 @@ impl BoxTask {
         let line = format_command(seq, cmd);
         write_within(w, line.as_bytes(), self.config.write_timeout).await?;
         let ack_ns = u64::try_from(self.config.ack_timeout.as_nanos()).unwrap_or(u64::MAX);
+        let sent_ns = self.shared.clock.now_ns();
         self.pending.push_back(Pending {
             seq,
             fire_tick: match cmd {
@@ -301,7 +351,8 @@ impl BoxTask {
                 _ => None,
             },
             is_ping: cmd == Command::Ping,
-            deadline_ns: self.shared.clock.now_ns().saturating_add(ack_ns),
+            sent_ns,
+            deadline_ns: sent_ns.saturating_add(ack_ns),
         });
         Ok(())
     }
@@ -342,6 +393,7 @@ async fn box_task(port: tokio_serial::SerialStream, config: TriggerBoxConfig, sh
         pending: VecDeque::with_capacity(config.queue),
         next_seq: 1,
         sent_level: LEVEL_UNSET,
+        offset_at_ns: 0,
     };
     let mut lines = LineBuffer::new();
     let mut chunk = [0u8; 256];
