@@ -142,6 +142,7 @@ async fn a_peer_that_stops_reading_causes_a_write_timeout() {
     let cfg = DmxConfig {
         refresh: Duration::from_millis(1),
         poll: Duration::from_millis(1),
+        min_interval: Duration::from_millis(1),
         write_timeout: Duration::from_millis(50),
         ..DmxConfig::default()
     };

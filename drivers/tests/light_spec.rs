@@ -50,3 +50,19 @@ fn errors_name_the_problem() {
         assert!(e.contains("expected sim, none"), "{input:?}: {e}");
     }
 }
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn non_serial_lights_open_to_none_and_a_missing_port_is_named() {
+    use hitl_drivers::light::SerialLight;
+    use hitl_hal::{Error, ErrorKind, MonotonicClock};
+    let clock = MonotonicClock::new();
+    assert!(SerialLight::open(&LightSpec::Sim, clock).await.unwrap().is_none());
+    assert!(SerialLight::open(&LightSpec::None, clock).await.unwrap().is_none());
+    let spec: LightSpec = "trigger:/dev/hitl-missing-box".parse().unwrap();
+    let Err(e) = SerialLight::open(&spec, clock).await else { panic!("missing port opened") };
+    assert_eq!(e.kind(), ErrorKind::NotFound);
+    assert!(
+        e.to_string().contains("trigger box: cannot open serial port /dev/hitl-missing-box"),
+        "{e}"
+    );
+}

@@ -6,8 +6,8 @@
 //! 16-bit (coarse channel then fine channel, 1.0 = 65535).
 //!
 //! The tick only stores the level into a lock-free slot; a tokio task picks it up every
-//! `poll` period, writes a frame when the level changed, and refreshes the universe every
-//! `refresh` period (DMX receivers expect a continuous stream). Write errors, write timeouts and
+//! `poll` period, writes a frame when the level changed (at most one per `min_interval`), and
+//! refreshes the universe every `refresh` period (DMX receivers expect a continuous stream). Write errors, write timeouts and
 //! hang-ups trip the sticky health flag, which the next call from the tick returns as an error.
 
 use std::sync::atomic::{AtomicU32, Ordering};
@@ -66,6 +66,9 @@ pub struct DmxConfig {
     pub refresh: Duration,
     /// How often the task looks at the level slot.
     pub poll: Duration,
+    /// Never send frames closer than this (a full DMX universe takes about 23 ms on the wire;
+    /// the widget cannot output faster).
+    pub min_interval: Duration,
     /// A frame write that takes longer than this is a fault.
     pub write_timeout: Duration,
     /// Nominal baud rate (the widget's USB serial ignores it).
@@ -80,6 +83,7 @@ impl Default for DmxConfig {
             universe_channels: UNIVERSE,
             refresh: Duration::from_millis(25),
             poll: Duration::from_millis(2),
+            min_interval: Duration::from_millis(23),
             write_timeout: Duration::from_millis(200),
             baud: 57_600,
         }
@@ -212,7 +216,9 @@ async fn refresh_task(
     loop {
         poll.tick().await;
         let bits = shared.level.load(Ordering::Acquire);
-        if sent == Some(bits) && last_write.elapsed() < config.refresh {
+        let since = last_write.elapsed();
+        let due = since >= config.refresh || (sent != Some(bits) && since >= config.min_interval);
+        if sent.is_some() && !due {
             continue;
         }
         let n = encode_frame(f32::from_bits(bits), &config, &mut buf);

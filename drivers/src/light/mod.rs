@@ -5,13 +5,15 @@
 //!   and light strobe lines, light level, e-stop and door inputs), protocol in [`protocol`] and
 //!   docs/trigger-box-protocol.md;
 //! - [`spec`]: the `--light sim|dmx:DEV|trigger:DEV|none` choice ([`LightSpec`]);
-//! - [`fault`]: the drivers' error type and sticky lock-free health flag.
+//! - [`fault`]: the drivers' error type and sticky lock-free health flag;
+//! - [`open`]: [`SerialLight`], the serial light a [`LightSpec`] names, opened.
 //!
 //! Every driver here is a tick-side handle that only touches atomics and lock-free queues, plus a
 //! tokio task that owns the port. See docs/lights.md.
 
 pub mod dmx;
 pub mod fault;
+pub mod open;
 pub mod protocol;
 pub mod serial;
 pub mod spec;
@@ -19,5 +21,6 @@ pub mod trigger_box;
 
 pub use dmx::{DmxConfig, DmxLight, DmxResolution};
 pub use fault::{Fault, SerialError};
+pub use open::SerialLight;
 pub use spec::LightSpec;
 pub use trigger_box::{TriggerBox, TriggerBoxConfig};
