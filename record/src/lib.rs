@@ -1,1 +1,32 @@
-//! (being built: see the issues)
+//! `hitl-record`: the crash-safe MCAP recording of a run, its reader, and the run report.
+//!
+//! The control loop pushes telemetry into [`Telemetry`] (bounded lock-free queues, never
+//! blocking: a full queue drops its oldest message and counts it) and frames through a separate
+//! small queue (a frame that cannot be queued becomes a `capture-not-recorded` safety event).
+//! The [`Recorder`] thread drains them into an MCAP file whose topics are the contract in
+//! ARCHITECTURE.md (see docs/mcap-topics.md), closing a chunk at least every 250 ms so a killed
+//! process loses at most that. [`RecorderHealth::is_failed`] tells the tick when the file can
+//! no longer be written so the interlock can trip.
+
+pub mod bench;
+pub mod error;
+pub mod health;
+pub mod metadata;
+pub mod msg;
+pub mod queues;
+pub mod reader;
+pub mod recorder;
+pub mod report;
+mod sink;
+pub mod topics;
+
+pub use error::{ReadError, RecordError};
+pub use health::RecorderHealth;
+pub use metadata::{RunMetadata, SunPhaseTrack};
+pub use msg::{
+    ArmStateMsg, DepthImage, EventDetail, EventKind, FrameRecord, LightMsg, Phase, Plane, Pose,
+    PoseStamped, SafetyEventMsg, SetpointMsg, TfMsg, TimingMsg,
+};
+pub use queues::{QueueCapacity, Telemetry};
+pub use recorder::{RecordSummary, Recorder, RecorderConfig, RecorderHandle};
+pub use sink::{ChunkCompression, DepthOutput};

@@ -1,0 +1,416 @@
+//! The messages a run records: plain data the tick and the camera intake hand to the recorder.
+//!
+//! Telemetry messages are `Copy` (or, for safety events raised from the tick, free of heap data)
+//! so the real-time tick can push them into bounded lock-free queues without allocating. Frames
+//! carry their pixel buffers and are built outside the tick by the camera intake.
+
+use hitl_hal::{ArmState, CaptureRequest, Intrinsics, RgbdFrame, DOF};
+use serde::{Deserialize, Serialize};
+
+/// Which part of a run a setpoint belongs to.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "lowercase")]
+pub enum Phase {
+    /// The slow, planned move from the arm's pose to the trajectory's first waypoint.
+    Approach,
+    /// Playing the trajectory.
+    Playback,
+    /// A controlled (jerk-limited) stop.
+    Stop,
+}
+
+/// `/arm/setpoint`: the setpoint the tick sent to the arm.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+pub struct SetpointMsg {
+    pub tick: u64,
+    /// Host monotonic time of the tick, nanoseconds.
+    pub t_ns: u64,
+    pub phase: Phase,
+    /// Joint positions, radians.
+    pub q: [f64; DOF],
+    /// Joint velocities, radians per second.
+    pub qd: [f64; DOF],
+}
+
+/// `/arm/state`: one report of the arm as measured.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+pub struct ArmStateMsg {
+    /// Host monotonic time the report was received, nanoseconds.
+    pub t_ns: u64,
+    pub q: [f64; DOF],
+    pub state: u8,
+    pub mode: u8,
+    pub error_code: u16,
+    pub warn_code: u16,
+}
+
+impl From<&ArmState> for ArmStateMsg {
+    fn from(s: &ArmState) -> Self {
+        Self {
+            t_ns: s.received_ns,
+            q: s.q,
+            state: s.state,
+            mode: s.mode,
+            error_code: u16::from(s.error_code),
+            warn_code: u16::from(s.warn_code),
+        }
+    }
+}
+
+/// `/loop/timing`: how late the tick woke and how long it took.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+pub struct TimingMsg {
+    pub tick: u64,
+    /// Host monotonic time the tick woke, nanoseconds (the message's log time).
+    pub t_ns: u64,
+    /// Wake-up time minus the tick's deadline, nanoseconds (negative: early).
+    pub wake_late_ns: i64,
+    /// Time the tick's work took, nanoseconds.
+    pub tick_ns: u64,
+    /// The tick missed its period.
+    pub overrun: bool,
+}
+
+/// `/light/state`: the lab light's commanded level.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+pub struct LightMsg {
+    pub t_ns: u64,
+    /// Level in [0, 1].
+    pub level: f32,
+}
+
+/// What happened, in the words of the safety case. Written as kebab-case strings.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum EventKind {
+    /// Command/measured deviation beyond its limit.
+    Deviation,
+    /// The arm's report stream went quiet.
+    ReportWatchdog,
+    /// The arm reported an error code.
+    ArmError,
+    /// The arm reported a warning code.
+    ArmWarning,
+    EStop,
+    DoorOpen,
+    /// Ctrl-C or the operator's stop.
+    OperatorStop,
+    /// The tick missed its period.
+    Overrun,
+    /// A joint outside its limits (with margin).
+    JointLimit,
+    /// A capture whose frame could not be queued for recording.
+    CaptureNotRecorded,
+    /// A frame the recorder could not write (malformed buffers).
+    FrameMalformed,
+    /// The recorder cannot write (disk full, file error).
+    RecorderFailed,
+    /// A controlled stop began.
+    StopStarted,
+    /// A controlled stop ended.
+    StopDone,
+    /// A device fault (camera, light, trigger).
+    DeviceFault,
+    /// Anything else; the detail says what.
+    Other,
+}
+
+impl EventKind {
+    /// The kebab-case name written to the file.
+    pub fn as_str(self) -> &'static str {
+        match self {
+            Self::Deviation => "deviation",
+            Self::ReportWatchdog => "report-watchdog",
+            Self::ArmError => "arm-error",
+            Self::ArmWarning => "arm-warning",
+            Self::EStop => "e-stop",
+            Self::DoorOpen => "door-open",
+            Self::OperatorStop => "operator-stop",
+            Self::Overrun => "overrun",
+            Self::JointLimit => "joint-limit",
+            Self::CaptureNotRecorded => "capture-not-recorded",
+            Self::FrameMalformed => "frame-malformed",
+            Self::RecorderFailed => "recorder-failed",
+            Self::StopStarted => "stop-started",
+            Self::StopDone => "stop-done",
+            Self::DeviceFault => "device-fault",
+            Self::Other => "other",
+        }
+    }
+}
+
+/// The detail of a safety event: numbers from the tick (formatted by the recorder), or text
+/// from code outside the tick.
+#[derive(Debug, Clone, PartialEq)]
+pub enum EventDetail {
+    /// Raised by the tick: no allocation. `joint` is 1-based when the event concerns one joint.
+    Numeric { tick: u64, joint: Option<u8>, value: f64, limit: f64 },
+    /// Raised outside the tick.
+    Text(String),
+}
+
+/// `/safety/event`: an interlock trip, fault or notable event.
+#[derive(Debug, Clone, PartialEq)]
+pub struct SafetyEventMsg {
+    pub t_ns: u64,
+    pub kind: EventKind,
+    pub detail: EventDetail,
+}
+
+impl SafetyEventMsg {
+    /// An event raised by the tick (never allocates).
+    pub fn numeric(
+        t_ns: u64,
+        kind: EventKind,
+        tick: u64,
+        joint: Option<u8>,
+        value: f64,
+        limit: f64,
+    ) -> Self {
+        Self { t_ns, kind, detail: EventDetail::Numeric { tick, joint, value, limit } }
+    }
+
+    /// An event raised outside the tick, with a pre-formatted detail.
+    pub fn text(t_ns: u64, kind: EventKind, detail: impl Into<String>) -> Self {
+        Self { t_ns, kind, detail: EventDetail::Text(detail.into()) }
+    }
+
+    /// The human-readable detail as written to the file.
+    pub fn detail_string(&self) -> String {
+        match &self.detail {
+            EventDetail::Text(s) => s.clone(),
+            EventDetail::Numeric { tick, joint: Some(j), value, limit } => {
+                format!("tick {tick} joint {j}: value {value} limit {limit}")
+            }
+            EventDetail::Numeric { tick, joint: None, value, limit } => {
+                format!("tick {tick}: value {value} limit {limit}")
+            }
+        }
+    }
+}
+
+/// A rigid transform: translation in metres and a unit quaternion (x, y, z, w).
+///
+/// As a transform `parent_T_child` it maps points of the child frame into the parent frame.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+pub struct Pose {
+    pub translation: [f64; 3],
+    /// Unit quaternion, x, y, z, w.
+    pub rotation: [f64; 4],
+}
+
+impl Pose {
+    pub const IDENTITY: Pose = Pose { translation: [0.0; 3], rotation: [0.0, 0.0, 0.0, 1.0] };
+
+    /// From a homogeneous 4x4 matrix (row-major, rotation part orthonormal).
+    pub fn from_matrix(m: &[[f64; 4]; 4]) -> Self {
+        let r = |i: usize, j: usize| m[i][j];
+        let trace = r(0, 0) + r(1, 1) + r(2, 2);
+        let (x, y, z, w);
+        if trace > 0.0 {
+            let s = (trace + 1.0).sqrt() * 2.0;
+            w = 0.25 * s;
+            x = (r(2, 1) - r(1, 2)) / s;
+            y = (r(0, 2) - r(2, 0)) / s;
+            z = (r(1, 0) - r(0, 1)) / s;
+        } else if r(0, 0) > r(1, 1) && r(0, 0) > r(2, 2) {
+            let s = (1.0 + r(0, 0) - r(1, 1) - r(2, 2)).sqrt() * 2.0;
+            w = (r(2, 1) - r(1, 2)) / s;
+            x = 0.25 * s;
+            y = (r(0, 1) + r(1, 0)) / s;
+            z = (r(0, 2) + r(2, 0)) / s;
+        } else if r(1, 1) > r(2, 2) {
+            let s = (1.0 + r(1, 1) - r(0, 0) - r(2, 2)).sqrt() * 2.0;
+            w = (r(0, 2) - r(2, 0)) / s;
+            x = (r(0, 1) + r(1, 0)) / s;
+            y = 0.25 * s;
+            z = (r(1, 2) + r(2, 1)) / s;
+        } else {
+            let s = (1.0 + r(2, 2) - r(0, 0) - r(1, 1)).sqrt() * 2.0;
+            w = (r(1, 0) - r(0, 1)) / s;
+            x = (r(0, 2) + r(2, 0)) / s;
+            y = (r(1, 2) + r(2, 1)) / s;
+            z = 0.25 * s;
+        }
+        let n = (x * x + y * y + z * z + w * w).sqrt();
+        Self { translation: [m[0][3], m[1][3], m[2][3]], rotation: [x / n, y / n, z / n, w / n] }
+    }
+
+    /// The rotation as a row-major 3x3 matrix.
+    pub fn rotation_matrix(&self) -> [[f64; 3]; 3] {
+        let [x, y, z, w] = self.rotation;
+        [
+            [1.0 - 2.0 * (y * y + z * z), 2.0 * (x * y - z * w), 2.0 * (x * z + y * w)],
+            [2.0 * (x * y + z * w), 1.0 - 2.0 * (x * x + z * z), 2.0 * (y * z - x * w)],
+            [2.0 * (x * z - y * w), 2.0 * (y * z + x * w), 1.0 - 2.0 * (x * x + y * y)],
+        ]
+    }
+
+    /// The homogeneous 4x4 matrix (row-major).
+    pub fn to_matrix(&self) -> [[f64; 4]; 4] {
+        let r = self.rotation_matrix();
+        let t = self.translation;
+        [
+            [r[0][0], r[0][1], r[0][2], t[0]],
+            [r[1][0], r[1][1], r[1][2], t[1]],
+            [r[2][0], r[2][1], r[2][2], t[2]],
+            [0.0, 0.0, 0.0, 1.0],
+        ]
+    }
+
+    /// `self * other` (apply `other` first).
+    pub fn compose(&self, other: &Pose) -> Pose {
+        let [ax, ay, az, aw] = self.rotation;
+        let [bx, by, bz, bw] = other.rotation;
+        let q = [
+            aw * bx + ax * bw + ay * bz - az * by,
+            aw * by - ax * bz + ay * bw + az * bx,
+            aw * bz + ax * by - ay * bx + az * bw,
+            aw * bw - ax * bx - ay * by - az * bz,
+        ];
+        let p = self.transform_point(other.translation);
+        Pose { translation: p, rotation: q }
+    }
+
+    /// The inverse transform.
+    pub fn inverse(&self) -> Pose {
+        let [x, y, z, w] = self.rotation;
+        let inv = Pose { translation: [0.0; 3], rotation: [-x, -y, -z, w] };
+        let t = inv.transform_point(self.translation);
+        Pose { translation: [-t[0], -t[1], -t[2]], rotation: inv.rotation }
+    }
+
+    /// Map a point of the child frame into the parent frame.
+    pub fn transform_point(&self, p: [f64; 3]) -> [f64; 3] {
+        let r = self.rotation_matrix();
+        let t = self.translation;
+        [
+            r[0][0] * p[0] + r[0][1] * p[1] + r[0][2] * p[2] + t[0],
+            r[1][0] * p[0] + r[1][1] * p[1] + r[1][2] * p[2] + t[1],
+            r[2][0] * p[0] + r[2][1] * p[1] + r[2][2] * p[2] + t[2],
+        ]
+    }
+
+    /// Angle of the rotation between two poses, radians.
+    pub fn angle_to(&self, other: &Pose) -> f64 {
+        let a = self.rotation;
+        let b = other.rotation;
+        let dot = (a[0] * b[0] + a[1] * b[1] + a[2] * b[2] + a[3] * b[3]).abs().min(1.0);
+        2.0 * dot.acos()
+    }
+
+    /// Distance between the translations, metres.
+    pub fn distance_to(&self, other: &Pose) -> f64 {
+        let d: f64 = (0..3).map(|i| (self.translation[i] - other.translation[i]).powi(2)).sum();
+        d.sqrt()
+    }
+}
+
+/// `/tf`: the transforms between base, flange, camera and target at one instant.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct TfMsg {
+    pub t_ns: u64,
+    /// `base_T_flange` (forward kinematics of the measured joints).
+    pub base_flange: Pose,
+    /// `flange_T_camera` (the camera mount, OpenCV camera axes).
+    pub flange_camera: Pose,
+    /// `base_T_target` (where the target sits in the arm-base frame).
+    pub base_target: Pose,
+}
+
+impl TfMsg {
+    /// `target_T_camera`: the camera's pose in the target frame.
+    pub fn camera_in_target(&self) -> Pose {
+        self.base_target.inverse().compose(&self.base_flange).compose(&self.flange_camera)
+    }
+}
+
+/// `/pose/gt` or `/pose/estimate`: the target's pose in the camera frame (OpenCV axes),
+/// stamped with the capture time of the frame it belongs to.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct PoseStamped {
+    /// Capture time of the frame, host monotonic nanoseconds.
+    pub capture_ns: u64,
+    /// `camera_T_target`.
+    pub pose: Pose,
+}
+
+/// One image plane, row-major, `channels` values per pixel.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Plane<T> {
+    pub width: u32,
+    pub height: u32,
+    pub data: Vec<T>,
+}
+
+impl<T> Plane<T> {
+    /// Whether the buffer holds exactly `width * height * channels` values.
+    pub fn is_consistent(&self, channels: usize) -> bool {
+        (self.width as usize)
+            .checked_mul(self.height as usize)
+            .and_then(|n| n.checked_mul(channels))
+            == Some(self.data.len())
+    }
+}
+
+/// A depth image as the camera delivered it.
+#[derive(Debug, Clone, PartialEq)]
+pub enum DepthImage {
+    /// 32FC1, metres, 0 where there is no return.
+    Metres(Plane<f32>),
+    /// 16UC1, millimetres, 0 where there is no return (what the Orbbec delivers natively).
+    Millimetres(Plane<u16>),
+}
+
+/// One capture as handed to the recorder by the camera intake (outside the tick).
+#[derive(Debug, Clone, PartialEq)]
+pub struct FrameRecord {
+    /// The tick that fired the capture.
+    pub tick: u64,
+    /// Capture (exposure) time on the host monotonic clock, nanoseconds: every message of this
+    /// frame (images, calibration, tf, ground-truth pose) is stamped with it.
+    pub capture_ns: u64,
+    pub intrinsics: Intrinsics,
+    /// rgb8.
+    pub color: Option<Plane<u8>>,
+    pub depth: Option<DepthImage>,
+    /// mono8, 255 target, 0 else.
+    pub mask: Option<Plane<u8>>,
+    /// Ground-truth `camera_T_target` (simulation, or a tracked target).
+    pub gt_pose: Option<Pose>,
+    /// The transforms at capture time.
+    pub tf: Option<TfMsg>,
+}
+
+impl FrameRecord {
+    /// Take a camera frame (no pixel copies).
+    pub fn from_rgbd(frame: RgbdFrame) -> Self {
+        let i = frame.intrinsics;
+        let CaptureRequest { tick, .. } = frame.request;
+        Self {
+            tick,
+            capture_ns: frame.exposure_ns,
+            intrinsics: i,
+            color: Some(Plane { width: i.width, height: i.height, data: frame.color }),
+            depth: Some(DepthImage::Metres(Plane {
+                width: i.width,
+                height: i.height,
+                data: frame.depth_m,
+            })),
+            mask: frame.mask.map(|m| Plane { width: i.width, height: i.height, data: m }),
+            gt_pose: None,
+            tf: None,
+        }
+    }
+}
+
+/// Convert metres to millimetres for 16UC1: rounded, 0 for no return, NaN, negative or
+/// beyond 65.535 m.
+pub fn metres_to_mm(m: f32) -> u16 {
+    let mm = m * 1000.0;
+    if mm.is_finite() && mm > 0.0 && mm <= 65535.0 {
+        mm.round() as u16
+    } else {
+        0
+    }
+}

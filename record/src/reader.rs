@@ -1,0 +1,306 @@
+//! Reading a recording back: walks the file in order (it works on a file cut short by a crash,
+//! up to the last complete record) and decodes the project's messages, for `hitl report` and
+//! `hitl eval`.
+
+use crate::error::ReadError;
+use crate::msg::{ArmStateMsg, LightMsg, Pose, PoseStamped, SetpointMsg, TfMsg, TimingMsg};
+use crate::topics;
+use foxglove::messages as fg;
+use mcap::records::Record;
+use mcap::sans_io::linear_reader::{LinearReadEvent, LinearReader, LinearReaderOptions};
+use serde::{Deserialize, Serialize};
+use std::collections::{BTreeMap, HashMap};
+use std::io::Read;
+use std::ops::ControlFlow;
+use std::path::Path;
+
+/// Largest record the reader accepts (a corrupt length must not allocate without bound).
+const RECORD_LIMIT: usize = 1 << 30;
+
+/// How a walk through the file ended.
+#[derive(Debug, Clone, PartialEq, Eq, Serialize)]
+pub struct ReadEnd {
+    /// The footer was reached: the file was closed cleanly.
+    pub complete: bool,
+    /// Why reading stopped early (a crash-cut file), if it did.
+    pub truncated: Option<String>,
+}
+
+/// One message as stored.
+pub struct RawMessage<'a> {
+    pub topic: &'a str,
+    pub log_time: u64,
+    pub data: &'a [u8],
+}
+
+/// Walk every message and metadata record in file order. `on_msg` may stop the walk early.
+pub fn visit(
+    path: &Path,
+    mut on_msg: impl FnMut(RawMessage<'_>) -> ControlFlow<()>,
+    mut on_meta: impl FnMut(&str, &BTreeMap<String, String>),
+) -> Result<ReadEnd, ReadError> {
+    let p = path.display().to_string();
+    let mut file =
+        std::fs::File::open(path).map_err(|e| ReadError::Io { path: p.clone(), source: e })?;
+    let mut r = LinearReader::new_with_options(
+        LinearReaderOptions::default().with_record_length_limit(RECORD_LIMIT),
+    );
+    let mut channels: HashMap<u16, String> = HashMap::new();
+    let mut any_record = false;
+    let mut complete = false;
+    while let Some(ev) = r.next_event() {
+        let ev = match ev {
+            Ok(ev) => ev,
+            Err(e) => {
+                if !any_record {
+                    return Err(ReadError::NotMcap { path: p, reason: e.to_string() });
+                }
+                return Ok(ReadEnd { complete, truncated: (!complete).then(|| e.to_string()) });
+            }
+        };
+        match ev {
+            LinearReadEvent::ReadRequest(n) => {
+                let buf = r.insert(n);
+                let got =
+                    file.read(buf).map_err(|e| ReadError::Io { path: p.clone(), source: e })?;
+                r.notify_read(got);
+            }
+            LinearReadEvent::Record { data, opcode } => {
+                any_record = true;
+                let rec = match mcap::parse_record(opcode, data) {
+                    Ok(rec) => rec,
+                    Err(e) => {
+                        return Ok(ReadEnd { complete: false, truncated: Some(e.to_string()) })
+                    }
+                };
+                match rec {
+                    Record::Channel(c) => {
+                        channels.insert(c.id, c.topic);
+                    }
+                    Record::Message { header, data } => {
+                        let topic =
+                            channels.get(&header.channel_id).map(String::as_str).unwrap_or("");
+                        let m = RawMessage { topic, log_time: header.log_time, data: &data };
+                        if on_msg(m).is_break() {
+                            return Ok(ReadEnd { complete: false, truncated: None });
+                        }
+                    }
+                    Record::Metadata(m) => on_meta(&m.name, &m.metadata),
+                    Record::Footer(_) => complete = true,
+                    _ => {}
+                }
+            }
+        }
+    }
+    Ok(ReadEnd {
+        complete,
+        truncated: (!complete).then(|| "file ends before its footer".to_string()),
+    })
+}
+
+/// A `/safety/event` as read back.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct EventRecord {
+    pub t_ns: u64,
+    pub kind: String,
+    pub detail: String,
+}
+
+/// An image's header (pixels are not kept).
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct ImageInfo {
+    pub t_ns: u64,
+    pub width: u32,
+    pub height: u32,
+    pub encoding: String,
+}
+
+/// Everything but the pixels of a recording.
+#[derive(Debug, Clone, Default)]
+pub struct Recording {
+    /// Metadata records by name (`run`, `sun_phase`, `recorder_stats`).
+    pub metadata: BTreeMap<String, BTreeMap<String, String>>,
+    pub setpoints: Vec<SetpointMsg>,
+    pub states: Vec<ArmStateMsg>,
+    pub timing: Vec<TimingMsg>,
+    pub lights: Vec<LightMsg>,
+    pub events: Vec<EventRecord>,
+    pub tf: Vec<TfMsg>,
+    pub pose_gt: Vec<PoseStamped>,
+    pub pose_estimate: Vec<PoseStamped>,
+    /// `/recorder/stats` messages, in order.
+    pub recorder_stats: Vec<serde_json::Value>,
+    pub depth_images: Vec<ImageInfo>,
+    /// Messages per topic.
+    pub topic_counts: BTreeMap<String, u64>,
+    pub end: Option<ReadEnd>,
+}
+
+impl Recording {
+    /// The Sun phase schedule (`t_s`, degrees), when the run recorded one.
+    pub fn sun_phase(&self) -> Option<(Vec<f64>, Vec<f64>)> {
+        let m = self.metadata.get(topics::META_SUN_PHASE)?;
+        let t: Vec<f64> = serde_json::from_str(m.get("t_s")?).ok()?;
+        let d: Vec<f64> = serde_json::from_str(m.get("sun_phase_deg")?).ok()?;
+        (t.len() == d.len()).then_some((t, d))
+    }
+}
+
+fn bad(path: &Path, topic: &str, reason: impl ToString) -> ReadError {
+    ReadError::BadMessage {
+        path: path.display().to_string(),
+        topic: topic.to_string(),
+        reason: reason.to_string(),
+    }
+}
+
+fn pose_of(p: Option<fg::Pose>) -> Pose {
+    let p = p.unwrap_or_default();
+    let t = p.position.unwrap_or_default();
+    let q = p.orientation.unwrap_or(fg::Quaternion { x: 0.0, y: 0.0, z: 0.0, w: 1.0 });
+    Pose { translation: [t.x, t.y, t.z], rotation: [q.x, q.y, q.z, q.w] }
+}
+
+fn ts_ns(t: Option<fg::Timestamp>) -> Option<u64> {
+    t.map(|t| t.total_nanos())
+}
+
+/// Decode a `/tf` message into the project's transform set (`None` if a frame is missing).
+pub fn decode_tf(data: &[u8], log_time: u64) -> Result<Option<TfMsg>, prost::DecodeError> {
+    let m = <fg::FrameTransforms as prost::Message>::decode(data)?;
+    let mut tf = TfMsg {
+        t_ns: log_time,
+        base_flange: Pose::IDENTITY,
+        flange_camera: Pose::IDENTITY,
+        base_target: Pose::IDENTITY,
+    };
+    let mut seen = 0u8;
+    for t in m.transforms {
+        let tr = t.translation.unwrap_or_default();
+        let q = t.rotation.unwrap_or_default();
+        let p = Pose { translation: [tr.x, tr.y, tr.z], rotation: [q.x, q.y, q.z, q.w] };
+        match (t.parent_frame_id.as_str(), t.child_frame_id.as_str()) {
+            (topics::FRAME_BASE, topics::FRAME_FLANGE) => {
+                tf.base_flange = p;
+                seen |= 1;
+            }
+            (topics::FRAME_FLANGE, topics::FRAME_CAMERA) => {
+                tf.flange_camera = p;
+                seen |= 2;
+            }
+            (topics::FRAME_BASE, topics::FRAME_TARGET) => {
+                tf.base_target = p;
+                seen |= 4;
+            }
+            _ => {}
+        }
+        if let Some(ns) = ts_ns(t.timestamp) {
+            tf.t_ns = ns;
+        }
+    }
+    Ok((seen == 7).then_some(tf))
+}
+
+/// Decode a `/pose/gt` or `/pose/estimate` message.
+pub fn decode_pose(data: &[u8], log_time: u64) -> Result<PoseStamped, prost::DecodeError> {
+    let m = <fg::PoseInFrame as prost::Message>::decode(data)?;
+    Ok(PoseStamped { capture_ns: ts_ns(m.timestamp).unwrap_or(log_time), pose: pose_of(m.pose) })
+}
+
+/// Decode a `/camera/*` image.
+pub fn decode_image(data: &[u8]) -> Result<fg::RawImage, prost::DecodeError> {
+    <fg::RawImage as prost::Message>::decode(data)
+}
+
+/// Depth in metres from a 32FC1 (metres) or 16UC1 (millimetres) image; `None` for other
+/// encodings or a buffer that does not match the size.
+pub fn depth_metres(img: &fg::RawImage) -> Option<Vec<f32>> {
+    let (w, h) = (img.width as usize, img.height as usize);
+    let (bpp, step) = match img.encoding.as_str() {
+        "32FC1" => (4, img.step as usize),
+        "16UC1" => (2, img.step as usize),
+        _ => return None,
+    };
+    if step < w * bpp || img.data.len() < step * h {
+        return None;
+    }
+    let mut out = Vec::with_capacity(w * h);
+    for row in 0..h {
+        let r = &img.data[row * step..row * step + w * bpp];
+        if bpp == 4 {
+            out.extend(r.chunks_exact(4).map(|b| f32::from_le_bytes([b[0], b[1], b[2], b[3]])));
+        } else {
+            out.extend(
+                r.chunks_exact(2).map(|b| f32::from(u16::from_le_bytes([b[0], b[1]])) / 1000.0),
+            );
+        }
+    }
+    Some(out)
+}
+
+/// Read a recording's messages (all but pixels), sorted by time within each topic.
+pub fn read_recording(path: &Path) -> Result<Recording, ReadError> {
+    let mut rec = Recording::default();
+    let mut err: Option<ReadError> = None;
+    let mut metas = Vec::new();
+    let end = visit(
+        path,
+        |m| {
+            *rec.topic_counts.entry(m.topic.to_string()).or_insert(0) += 1;
+            if let Err(e) = decode_into(&mut rec, &m) {
+                err = Some(bad(path, m.topic, e));
+                return ControlFlow::Break(());
+            }
+            ControlFlow::Continue(())
+        },
+        |name, map| metas.push((name.to_string(), map.clone())),
+    )?;
+    if let Some(e) = err {
+        return Err(e);
+    }
+    rec.metadata.extend(metas);
+    rec.setpoints.sort_by_key(|m| m.t_ns);
+    rec.states.sort_by_key(|m| m.t_ns);
+    rec.timing.sort_by_key(|m| m.t_ns);
+    rec.lights.sort_by_key(|m| m.t_ns);
+    rec.events.sort_by_key(|m| m.t_ns);
+    rec.tf.sort_by_key(|m| m.t_ns);
+    rec.pose_gt.sort_by_key(|m| m.capture_ns);
+    rec.pose_estimate.sort_by_key(|m| m.capture_ns);
+    rec.end = Some(end);
+    Ok(rec)
+}
+
+fn decode_into(rec: &mut Recording, m: &RawMessage<'_>) -> Result<(), String> {
+    let e = |x: &dyn std::fmt::Display| x.to_string();
+    match m.topic {
+        topics::SETPOINT => rec.setpoints.push(serde_json::from_slice(m.data).map_err(|x| e(&x))?),
+        topics::STATE => rec.states.push(serde_json::from_slice(m.data).map_err(|x| e(&x))?),
+        topics::TIMING => rec.timing.push(serde_json::from_slice(m.data).map_err(|x| e(&x))?),
+        topics::LIGHT => rec.lights.push(serde_json::from_slice(m.data).map_err(|x| e(&x))?),
+        topics::EVENT => rec.events.push(serde_json::from_slice(m.data).map_err(|x| e(&x))?),
+        topics::RECORDER_STATS => {
+            rec.recorder_stats.push(serde_json::from_slice(m.data).map_err(|x| e(&x))?)
+        }
+        topics::TF => {
+            if let Some(tf) = decode_tf(m.data, m.log_time).map_err(|x| e(&x))? {
+                rec.tf.push(tf);
+            }
+        }
+        topics::POSE_GT => rec.pose_gt.push(decode_pose(m.data, m.log_time).map_err(|x| e(&x))?),
+        topics::POSE_ESTIMATE => {
+            rec.pose_estimate.push(decode_pose(m.data, m.log_time).map_err(|x| e(&x))?)
+        }
+        topics::DEPTH => {
+            let img = decode_image(m.data).map_err(|x| e(&x))?;
+            rec.depth_images.push(ImageInfo {
+                t_ns: ts_ns(img.timestamp).unwrap_or(m.log_time),
+                width: img.width,
+                height: img.height,
+                encoding: img.encoding,
+            });
+        }
+        _ => {}
+    }
+    Ok(())
+}

@@ -1,0 +1,444 @@
+//! The MCAP file itself: schemas, channels, and how each message becomes bytes.
+//!
+//! Project messages are JSON with a JSON Schema; images, calibration, transforms and poses use
+//! Foxglove's well-known protobuf schemas (from the `foxglove` crate) so Foxglove and the
+//! Python `mcap-protobuf-support` decoder read them as they are.
+
+use crate::error::RecordError;
+use crate::metadata::RunMetadata;
+use crate::msg::{
+    metres_to_mm, ArmStateMsg, DepthImage, EventDetail, FrameRecord, LightMsg, Plane, Pose,
+    PoseStamped, SafetyEventMsg, SetpointMsg, TfMsg, TimingMsg,
+};
+use crate::topics;
+use foxglove::messages as fg;
+use foxglove::Encode;
+use mcap::records::{MessageHeader, Metadata};
+use serde::Serialize;
+use std::collections::BTreeMap;
+use std::fs::File;
+use std::io::BufWriter;
+use std::path::Path;
+
+/// Every channel of the file, in a fixed order.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub(crate) enum Ch {
+    Setpoint,
+    State,
+    Timing,
+    Light,
+    Event,
+    Tf,
+    PoseGt,
+    PoseEstimate,
+    Color,
+    Depth,
+    Mask,
+    Calibration,
+    Stats,
+}
+
+pub(crate) const CHANNELS: [Ch; 13] = [
+    Ch::Setpoint,
+    Ch::State,
+    Ch::Timing,
+    Ch::Light,
+    Ch::Event,
+    Ch::Tf,
+    Ch::PoseGt,
+    Ch::PoseEstimate,
+    Ch::Color,
+    Ch::Depth,
+    Ch::Mask,
+    Ch::Calibration,
+    Ch::Stats,
+];
+
+impl Ch {
+    pub(crate) fn topic(self) -> &'static str {
+        match self {
+            Ch::Setpoint => topics::SETPOINT,
+            Ch::State => topics::STATE,
+            Ch::Timing => topics::TIMING,
+            Ch::Light => topics::LIGHT,
+            Ch::Event => topics::EVENT,
+            Ch::Tf => topics::TF,
+            Ch::PoseGt => topics::POSE_GT,
+            Ch::PoseEstimate => topics::POSE_ESTIMATE,
+            Ch::Color => topics::COLOR,
+            Ch::Depth => topics::DEPTH,
+            Ch::Mask => topics::MASK,
+            Ch::Calibration => topics::CALIBRATION,
+            Ch::Stats => topics::RECORDER_STATS,
+        }
+    }
+
+    fn schema(self) -> Result<(String, &'static str, Vec<u8>), RecordError> {
+        fn fox<T: Encode>() -> Result<(String, &'static str, Vec<u8>), RecordError> {
+            let s = T::get_schema()
+                .ok_or_else(|| RecordError::Encode("foxglove schema missing".into()))?;
+            Ok((s.name, "protobuf", s.data.into_owned()))
+        }
+        match self {
+            Ch::Tf => fox::<fg::FrameTransforms>(),
+            Ch::PoseGt | Ch::PoseEstimate => fox::<fg::PoseInFrame>(),
+            Ch::Color | Ch::Depth | Ch::Mask => fox::<fg::RawImage>(),
+            Ch::Calibration => fox::<fg::CameraCalibration>(),
+            _ => {
+                let (name, s) = topics::json_schema(self.topic()).ok_or_else(|| {
+                    RecordError::Encode(format!("no schema for {}", self.topic()))
+                })?;
+                Ok((name.to_string(), "jsonschema", s.into_bytes()))
+            }
+        }
+    }
+}
+
+/// How depth is written.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub enum DepthOutput {
+    /// As the camera delivered it (32FC1 metres or 16UC1 millimetres).
+    #[default]
+    AsDelivered,
+    /// Always 16UC1 millimetres (half the bytes of 32FC1; 1 mm resolution, 65.5 m range).
+    Millimetres16,
+}
+
+/// Compression of the chunks.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum ChunkCompression {
+    None,
+    /// zstd at the given level (1 is fast).
+    Zstd(u32),
+    Lz4,
+}
+
+pub(crate) struct McapSink {
+    w: mcap::Writer<BufWriter<File>>,
+    ids: [u16; CHANNELS.len()],
+    seq: [u32; CHANNELS.len()],
+    pub written: [u64; CHANNELS.len()],
+    buf: Vec<u8>,
+    /// Message payload bytes handed to the writer (before compression).
+    pub bytes_in: u64,
+    depth_output: DepthOutput,
+}
+
+fn ts(ns: u64) -> Option<fg::Timestamp> {
+    let sec = u32::try_from(ns / 1_000_000_000).unwrap_or(u32::MAX);
+    Some(fg::Timestamp::new(sec, (ns % 1_000_000_000) as u32))
+}
+
+fn fg_pose(p: &Pose) -> fg::Pose {
+    let [x, y, z] = p.translation;
+    let [qx, qy, qz, qw] = p.rotation;
+    fg::Pose {
+        position: Some(fg::Vector3 { x, y, z }),
+        orientation: Some(fg::Quaternion { x: qx, y: qy, z: qz, w: qw }),
+    }
+}
+
+fn fg_transform(t_ns: u64, parent: &str, child: &str, p: &Pose) -> fg::FrameTransform {
+    let fp = fg_pose(p);
+    fg::FrameTransform {
+        timestamp: ts(t_ns),
+        parent_frame_id: parent.to_string(),
+        child_frame_id: child.to_string(),
+        translation: fp.position,
+        rotation: fp.orientation,
+    }
+}
+
+#[derive(Serialize)]
+struct EventJson<'a> {
+    t_ns: u64,
+    kind: &'a str,
+    detail: String,
+    #[serde(skip_serializing_if = "Option::is_none")]
+    tick: Option<u64>,
+    #[serde(skip_serializing_if = "Option::is_none")]
+    joint: Option<u8>,
+    #[serde(skip_serializing_if = "Option::is_none")]
+    value: Option<f64>,
+    #[serde(skip_serializing_if = "Option::is_none")]
+    limit: Option<f64>,
+}
+
+impl McapSink {
+    pub fn create(
+        path: &Path,
+        meta: &RunMetadata,
+        compression: ChunkCompression,
+        compression_threads: u32,
+        chunk_size: u64,
+        depth_output: DepthOutput,
+    ) -> Result<Self, RecordError> {
+        let file = File::create(path)
+            .map_err(|e| RecordError::Io { path: path.display().to_string(), source: e })?;
+        let (comp, level) = match compression {
+            ChunkCompression::None => (None, 0),
+            ChunkCompression::Zstd(l) => (Some(mcap::Compression::Zstd), l),
+            ChunkCompression::Lz4 => (Some(mcap::Compression::Lz4), 0),
+        };
+        let opts = mcap::WriteOptions::new()
+            .compression(comp)
+            .compression_level(level)
+            .compression_threads(compression_threads)
+            .chunk_size(Some(chunk_size))
+            .profile("")
+            .library(format!("hitl-record {}", env!("CARGO_PKG_VERSION")));
+        let mut w = opts.create(BufWriter::with_capacity(1 << 20, file))?;
+        let mut ids = [0u16; CHANNELS.len()];
+        for (i, ch) in CHANNELS.iter().enumerate() {
+            let (name, enc, data) = ch.schema()?;
+            let sid = w.add_schema(&name, enc, &data)?;
+            let msg_enc = if enc == "protobuf" { "protobuf" } else { "json" };
+            ids[i] = w.add_channel(sid, ch.topic(), msg_enc, &BTreeMap::new())?;
+        }
+        w.write_metadata(&Metadata {
+            name: topics::META_RUN.to_string(),
+            metadata: meta.to_map(),
+        })?;
+        if let Some(sun) = &meta.sun_phase {
+            let sun = sun.decimated(4096);
+            let mut m = BTreeMap::new();
+            m.insert("t_s".into(), serde_json::to_string(&sun.t_s)?);
+            m.insert("sun_phase_deg".into(), serde_json::to_string(&sun.sun_phase_deg)?);
+            w.write_metadata(&Metadata { name: topics::META_SUN_PHASE.to_string(), metadata: m })?;
+        }
+        w.flush()?;
+        Ok(Self {
+            w,
+            ids,
+            seq: [0; CHANNELS.len()],
+            written: [0; CHANNELS.len()],
+            buf: Vec::with_capacity(4096),
+            bytes_in: 0,
+            depth_output,
+        })
+    }
+
+    fn put(&mut self, ch: Ch, log_time: u64, data: &[u8]) -> Result<(), RecordError> {
+        let i = ch as usize;
+        self.seq[i] = self.seq[i].wrapping_add(1);
+        self.w.write_to_known_channel(
+            &MessageHeader {
+                channel_id: self.ids[i],
+                sequence: self.seq[i],
+                log_time,
+                publish_time: log_time,
+            },
+            data,
+        )?;
+        self.written[i] += 1;
+        self.bytes_in += data.len() as u64;
+        Ok(())
+    }
+
+    fn put_buf(&mut self, ch: Ch, log_time: u64) -> Result<(), RecordError> {
+        let buf = std::mem::take(&mut self.buf);
+        let r = self.put(ch, log_time, &buf);
+        self.buf = buf;
+        r
+    }
+
+    fn json<T: Serialize>(&mut self, ch: Ch, log_time: u64, m: &T) -> Result<(), RecordError> {
+        self.buf.clear();
+        serde_json::to_writer(&mut self.buf, m)?;
+        self.put_buf(ch, log_time)
+    }
+
+    fn proto<T: Encode>(&mut self, ch: Ch, log_time: u64, m: &T) -> Result<(), RecordError> {
+        self.buf.clear();
+        m.encode(&mut self.buf).map_err(|e| RecordError::Encode(format!("{}: {e}", ch.topic())))?;
+        self.put_buf(ch, log_time)
+    }
+
+    pub fn setpoint(&mut self, m: &SetpointMsg) -> Result<(), RecordError> {
+        self.json(Ch::Setpoint, m.t_ns, m)
+    }
+    pub fn state(&mut self, m: &ArmStateMsg) -> Result<(), RecordError> {
+        self.json(Ch::State, m.t_ns, m)
+    }
+    pub fn timing(&mut self, m: &TimingMsg) -> Result<(), RecordError> {
+        self.json(Ch::Timing, m.t_ns, m)
+    }
+    pub fn light(&mut self, m: &LightMsg) -> Result<(), RecordError> {
+        self.json(Ch::Light, m.t_ns, m)
+    }
+    pub fn event(&mut self, m: &SafetyEventMsg) -> Result<(), RecordError> {
+        let (tick, joint, value, limit) = match &m.detail {
+            EventDetail::Numeric { tick, joint, value, limit } => {
+                (Some(*tick), *joint, Some(*value), Some(*limit))
+            }
+            EventDetail::Text(_) => (None, None, None, None),
+        };
+        let j = EventJson {
+            t_ns: m.t_ns,
+            kind: m.kind.as_str(),
+            detail: m.detail_string(),
+            tick,
+            joint,
+            value: value.filter(|v| v.is_finite()),
+            limit: limit.filter(|v| v.is_finite()),
+        };
+        self.json(Ch::Event, m.t_ns, &j)
+    }
+    pub fn stats(&mut self, t_ns: u64, v: &serde_json::Value) -> Result<(), RecordError> {
+        self.json(Ch::Stats, t_ns, v)
+    }
+
+    pub fn tf(&mut self, m: &TfMsg) -> Result<(), RecordError> {
+        let t = m.t_ns;
+        let msg = fg::FrameTransforms {
+            transforms: vec![
+                fg_transform(t, topics::FRAME_BASE, topics::FRAME_FLANGE, &m.base_flange),
+                fg_transform(t, topics::FRAME_FLANGE, topics::FRAME_CAMERA, &m.flange_camera),
+                fg_transform(t, topics::FRAME_BASE, topics::FRAME_TARGET, &m.base_target),
+            ],
+        };
+        self.proto(Ch::Tf, t, &msg)
+    }
+
+    fn pose(&mut self, ch: Ch, m: &PoseStamped) -> Result<(), RecordError> {
+        let msg = fg::PoseInFrame {
+            timestamp: ts(m.capture_ns),
+            frame_id: topics::FRAME_CAMERA.to_string(),
+            pose: Some(fg_pose(&m.pose)),
+        };
+        self.proto(ch, m.capture_ns, &msg)
+    }
+    pub fn pose_estimate(&mut self, m: &PoseStamped) -> Result<(), RecordError> {
+        self.pose(Ch::PoseEstimate, m)
+    }
+
+    fn image(
+        &mut self,
+        ch: Ch,
+        t: u64,
+        (width, height): (u32, u32),
+        (encoding, bytes_per_px): (&str, u32),
+        data: bytes::Bytes,
+    ) -> Result<(), RecordError> {
+        let msg = fg::RawImage {
+            timestamp: ts(t),
+            frame_id: topics::FRAME_CAMERA.to_string(),
+            width,
+            height,
+            encoding: encoding.to_string(),
+            step: width.saturating_mul(bytes_per_px),
+            data,
+        };
+        self.proto(ch, t, &msg)
+    }
+
+    /// Write every message of one capture, all stamped with its capture time. Returns a
+    /// description of what was malformed (and skipped), if anything.
+    pub fn frame(&mut self, f: FrameRecord) -> Result<Option<String>, RecordError> {
+        let t = f.capture_ns;
+        let mut bad = Vec::new();
+        let i = f.intrinsics;
+        let cal = fg::CameraCalibration {
+            timestamp: ts(t),
+            frame_id: topics::FRAME_CAMERA.to_string(),
+            width: i.width,
+            height: i.height,
+            distortion_model: "plumb_bob".to_string(),
+            d: vec![0.0; 5],
+            k: vec![i.fx, 0.0, i.cx, 0.0, i.fy, i.cy, 0.0, 0.0, 1.0],
+            r: vec![1.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 1.0],
+            p: vec![i.fx, 0.0, i.cx, 0.0, 0.0, i.fy, i.cy, 0.0, 0.0, 0.0, 1.0, 0.0],
+        };
+        self.proto(Ch::Calibration, t, &cal)?;
+        if let Some(tf) = &f.tf {
+            let mut tf = *tf;
+            tf.t_ns = t;
+            self.tf(&tf)?;
+        }
+        if let Some(p) = &f.gt_pose {
+            self.pose(Ch::PoseGt, &PoseStamped { capture_ns: t, pose: *p })?;
+        }
+        if let Some(c) = f.color {
+            if c.is_consistent(3) {
+                self.image(Ch::Color, t, (c.width, c.height), ("rgb8", 3), c.data.into())?;
+            } else {
+                bad.push("color");
+            }
+        }
+        if let Some(m) = f.mask {
+            if m.is_consistent(1) {
+                self.image(Ch::Mask, t, (m.width, m.height), ("mono8", 1), m.data.into())?;
+            } else {
+                bad.push("mask");
+            }
+        }
+        if let Some(d) = f.depth {
+            let ok = match &d {
+                DepthImage::Metres(p) => p.is_consistent(1),
+                DepthImage::Millimetres(p) => p.is_consistent(1),
+            };
+            if ok {
+                let (w, h, enc, bpp, data) = depth_bytes(d, self.depth_output);
+                self.image(Ch::Depth, t, (w, h), (enc, bpp), data)?;
+            } else {
+                bad.push("depth");
+            }
+        }
+        Ok((!bad.is_empty()).then(|| {
+            format!("tick {}: {} buffer size does not match width x height", f.tick, bad.join(", "))
+        }))
+    }
+
+    /// Close the current chunk and hand it to the OS (survives a kill of this process).
+    pub fn flush(&mut self) -> Result<(), RecordError> {
+        self.w.flush()?;
+        Ok(())
+    }
+
+    pub fn write_metadata(
+        &mut self,
+        name: &str,
+        map: BTreeMap<String, String>,
+    ) -> Result<(), RecordError> {
+        self.w.write_metadata(&Metadata { name: name.to_string(), metadata: map })?;
+        Ok(())
+    }
+
+    /// Write the summary and footer, flush and sync the file.
+    pub fn finish(mut self) -> Result<(), RecordError> {
+        self.w.finish()?;
+        let bw = self.w.into_inner();
+        let file = bw
+            .into_inner()
+            .map_err(|e| RecordError::Io { path: "recording".into(), source: e.into_error() })?;
+        file.sync_all().map_err(|e| RecordError::Io { path: "recording".into(), source: e })?;
+        Ok(())
+    }
+}
+
+fn u16_bytes(v: &[u16]) -> bytes::Bytes {
+    let mut out = Vec::with_capacity(v.len() * 2);
+    for x in v {
+        out.extend_from_slice(&x.to_le_bytes());
+    }
+    out.into()
+}
+
+fn depth_bytes(d: DepthImage, out: DepthOutput) -> (u32, u32, &'static str, u32, bytes::Bytes) {
+    match (d, out) {
+        (DepthImage::Millimetres(Plane { width, height, data }), _) => {
+            (width, height, "16UC1", 2, u16_bytes(&data))
+        }
+        (DepthImage::Metres(Plane { width, height, data }), DepthOutput::Millimetres16) => {
+            let mm: Vec<u16> = data.iter().map(|m| metres_to_mm(*m)).collect();
+            (width, height, "16UC1", 2, u16_bytes(&mm))
+        }
+        (DepthImage::Metres(Plane { width, height, data }), DepthOutput::AsDelivered) => {
+            let mut out = Vec::with_capacity(data.len() * 4);
+            for x in &data {
+                out.extend_from_slice(&x.to_le_bytes());
+            }
+            (width, height, "32FC1", 4, out.into())
+        }
+    }
+}
