@@ -135,6 +135,8 @@ api! {
     ob_device_get_multi_device_sync_config: fn(*const ObDevice, Err) -> ObMultiDeviceSyncConfig;
     ob_device_set_multi_device_sync_config: fn(*mut ObDevice, *const ObMultiDeviceSyncConfig, Err);
     ob_device_trigger_capture: fn(*mut ObDevice, Err);
+    ob_device_is_global_timestamp_supported: fn(*const ObDevice, Err) -> bool;
+    ob_device_enable_global_timestamp: fn(*mut ObDevice, bool, Err);
     ob_create_pipeline_with_device: fn(*const ObDevice, Err) -> *mut ObPipeline;
     ob_delete_pipeline: fn(*mut ObPipeline, Err);
     ob_pipeline_get_stream_profile_list: fn(*const ObPipeline, c_int, Err) -> *mut ObStreamProfileList;
@@ -161,6 +163,7 @@ api! {
     ob_frame_get_data_size: fn(*const ObFrame, Err) -> u32;
     ob_frame_get_timestamp_us: fn(*const ObFrame, Err) -> u64;
     ob_frame_get_system_timestamp_us: fn(*const ObFrame, Err) -> u64;
+    ob_frame_get_global_timestamp_us: fn(*const ObFrame, Err) -> u64;
     ob_video_frame_get_width: fn(*const ObFrame, Err) -> u32;
     ob_video_frame_get_height: fn(*const ObFrame, Err) -> u32;
     ob_depth_frame_get_value_scale: fn(*const ObFrame, Err) -> f32;
@@ -401,6 +404,23 @@ impl Device {
         })
     }
 
+    /// Turn on global timestamps (device exposure time converted to the host clock) where the
+    /// camera supports them; returns whether they are on.
+    pub fn enable_global_timestamps(&self) -> Result<bool, SdkError> {
+        let api = &self.sdk.api;
+        // SAFETY: `self.ptr` is a live device.
+        let supported = self.sdk.call("ob_device_is_global_timestamp_supported", |e| unsafe {
+            (api.ob_device_is_global_timestamp_supported)(self.ptr, e)
+        })?;
+        if supported {
+            // SAFETY: `self.ptr` is a live device.
+            self.sdk.call("ob_device_enable_global_timestamp", |e| unsafe {
+                (api.ob_device_enable_global_timestamp)(self.ptr, true, e)
+            })?;
+        }
+        Ok(supported)
+    }
+
     pub fn trigger_capture(&self) -> Result<(), SdkError> {
         // SAFETY: `self.ptr` is a live device.
         self.sdk.call("ob_device_trigger_capture", |e| unsafe {
@@ -616,8 +636,9 @@ impl Frame {
         Ok((w, h))
     }
 
-    /// Device and host (system) timestamps, microseconds.
-    pub fn timestamps_us(&self) -> Result<(u64, u64), SdkError> {
+    /// Device, host-arrival (system) and global (exposure on the host clock, 0 when off)
+    /// timestamps, microseconds.
+    pub fn timestamps_us(&self) -> Result<(u64, u64, u64), SdkError> {
         let api = &self.sdk.api;
         // SAFETY: live frame.
         let dev = self.sdk.call("ob_frame_get_timestamp_us", |e| unsafe {
@@ -627,7 +648,11 @@ impl Frame {
         let sys = self.sdk.call("ob_frame_get_system_timestamp_us", |e| unsafe {
             (api.ob_frame_get_system_timestamp_us)(self.ptr, e)
         })?;
-        Ok((dev, sys))
+        // SAFETY: live frame.
+        let global = self.sdk.call("ob_frame_get_global_timestamp_us", |e| unsafe {
+            (api.ob_frame_get_global_timestamp_us)(self.ptr, e)
+        })?;
+        Ok((dev, sys, global))
     }
 
     /// Millimetres per depth unit.

@@ -108,6 +108,7 @@ struct Session {
     device: Device,
     _context: Context,
     monotonic: bool,
+    global_timestamps: bool,
     intrinsics: Option<Intrinsics>,
     name: String,
 }
@@ -178,6 +179,7 @@ fn open_session(options: &OrbbecOptions) -> Result<(Session, OrbbecInfo), Orbbec
         device,
         _context: context,
         monotonic,
+        global_timestamps: false,
         intrinsics: None,
         name,
     };
@@ -239,6 +241,8 @@ impl Session {
         sync.trigger_to_image_delay_us = 0;
         sync.depth_delay_us = 0;
         sync.color_delay_us = 0;
+        // Optional: cameras without global timestamps fall back to arrival times.
+        self.global_timestamps = self.device.enable_global_timestamps().unwrap_or(false);
         self.device
             .set_sync_config(&sync)
             .map_err(|e| OrbbecError::sdk("setting software-trigger mode", &e))?;
@@ -278,12 +282,15 @@ impl Session {
         let intrinsics = self.intrinsics.ok_or_else(|| {
             OrbbecError::new(ErrorKind::InvalidRequest, "Orbbec camera: capture before configure")
         })?;
-        let (device_us, system_us) =
+        let (device_us, system_us, global_us) =
             color.timestamps_us().map_err(|e| OrbbecError::sdk("frame timestamps", &e))?;
+        // Exposure on the host clock where the camera can say it; else the arrival time, which
+        // is later than the exposure by the transfer time.
+        let host_us = if self.global_timestamps && global_us != 0 { global_us } else { system_us };
         Ok(RgbdFrame {
             request,
             device_ns: device_us.saturating_mul(1000),
-            exposure_ns: host_ns(system_us, self.monotonic, &options.clock),
+            exposure_ns: host_ns(host_us, self.monotonic, &options.clock),
             intrinsics,
             color: color_rgb8(&color, intrinsics)?,
             depth_m: depth_metres(&depth, intrinsics)?,
