@@ -24,3 +24,15 @@ pub use fault::{Fault, SerialError};
 pub use open::SerialLight;
 pub use spec::LightSpec;
 pub use trigger_box::{TriggerBox, TriggerBoxConfig};
+
+#[cfg(test)]
+mod tests {
+    /// The tick-side handles move to the real-time thread.
+    #[test]
+    fn handles_are_send() {
+        fn send<T: Send + 'static>() {}
+        send::<super::DmxLight>();
+        send::<super::TriggerBox>();
+        send::<super::SerialLight>();
+    }
+}

@@ -201,3 +201,13 @@ impl RgbdCamera for OrbbecCamera {
 
 /// Frames produced by the worker.
 pub(crate) type FrameQueue = ArrayQueue<RgbdFrame>;
+
+#[cfg(test)]
+mod tests {
+    /// The camera handle moves to the real-time thread.
+    #[test]
+    fn handle_is_send() {
+        fn send<T: Send + 'static>() {}
+        send::<super::OrbbecCamera>();
+    }
+}
