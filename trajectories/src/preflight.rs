@@ -1,1 +1,471 @@
-//! (being built: see the issues)
+//! The preflight: the rules `hitl check` applies and `hitl run` applies again before anything
+//! moves. Checked at every setpoint tick of the [`SetpointTable`] (what the arm will actually be
+//! sent, spline swings between waypoints included):
+//!
+//! - joint positions inside the xArm7 limits shrunk by `margins.joint_limit_rad`;
+//! - peak |velocity|, |acceleration|, |jerk| per joint against `limits`;
+//! - per-tick step (largest joint change between two setpoints) against `limits.max_step_rad`
+//!   (servo mode runs each step at full speed);
+//! - clearance of every arm capsule (links, flange, camera body) to each enclosure face (x-, x+,
+//!   y-, y+, floor, ceiling), keeping `margins.wall_m`, and to each keep-out (target, tripod,
+//!   light), keeping `margins.keepout_m`;
+//! - camera optical centre to target centre at least `camera.min_target_distance_m`.
+//!
+//! Exemption: the `base` capsule stands on the floor, so its floor clearance is not checked (it
+//! is bolted there; its hemispherical end reaches below the base plate by construction). Every
+//! other capsule is checked against every surface, and the base capsule against the walls,
+//! ceiling and keep-outs (a lab config that puts the base too near a wall is refused too).
+//! See `docs/preflight.md`.
+
+use crate::geometry::Capsule;
+use crate::kinematics::{self, CAPSULE_NAMES, DOF, JOINT_LIMITS};
+use crate::lab::LabConfig;
+use crate::timing::SetpointTable;
+use crate::trajectory::Trajectory;
+use nalgebra::Point3;
+use serde::Serialize;
+
+/// Names of the enclosure faces, in [`Capsule::box_clearances`] order.
+pub const FACE_NAMES: [&str; 6] = ["wall x-", "wall x+", "wall y-", "wall y+", "floor", "ceiling"];
+
+/// Index of the base capsule in [`kinematics::arm_capsules`].
+const BASE: usize = 0;
+/// Index of the floor in [`FACE_NAMES`].
+const FLOOR: usize = 4;
+
+/// Peaks of one joint over the whole table, against its limits.
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct JointPeaks {
+    /// 1-based joint number, as the lab says it.
+    pub joint: usize,
+    /// Lowest and highest setpoint, radians.
+    pub min_rad: f64,
+    pub max_rad: f64,
+    /// Allowed range: the xArm7 limits shrunk by the margin, radians.
+    pub allowed_min_rad: f64,
+    pub allowed_max_rad: f64,
+    pub peak_velocity: f64,
+    pub velocity_limit: f64,
+    pub peak_acceleration: f64,
+    pub acceleration_limit: f64,
+    pub peak_jerk: f64,
+    pub jerk_limit: f64,
+    /// Largest change between two setpoints, radians.
+    pub peak_step_rad: f64,
+    pub step_limit_rad: f64,
+}
+
+/// The smallest clearance to one surface over the whole table, and where it happened.
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct Clearance {
+    /// The surface: a face of [`FACE_NAMES`], `keep-out target|tripod|light`, or
+    /// `camera-target distance`.
+    pub surface: String,
+    /// Smallest clearance, metres (negative: overlapping). For `camera-target distance`, the
+    /// smallest distance from the optical centre to the target centre.
+    pub min_m: f64,
+    /// What the lab requires (the margin, or the minimum distance), metres.
+    pub required_m: f64,
+    pub tick: usize,
+    pub time_s: f64,
+    /// The capsule closest to the surface (`camera` for the camera-target distance).
+    pub capsule: String,
+}
+
+/// What a violation is about.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize)]
+#[serde(rename_all = "snake_case")]
+pub enum Rule {
+    JointLimit,
+    Velocity,
+    Acceleration,
+    Jerk,
+    Step,
+    Wall,
+    KeepOut,
+    CameraTargetDistance,
+}
+
+/// One broken rule, with where it is worst.
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct Violation {
+    pub rule: Rule,
+    /// One line naming what and where, for people.
+    pub message: String,
+    /// Where the rule is broken worst.
+    pub tick: usize,
+    pub time_s: f64,
+    /// The waypoint segment that tick lies in (the waypoint at or before it).
+    pub waypoint: usize,
+    /// 1-based joint, for joint rules.
+    pub joint: Option<usize>,
+    /// Surface and capsule, for clearance rules.
+    pub surface: Option<String>,
+    pub capsule: Option<String>,
+}
+
+/// Everything `hitl check` reports.
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct PreflightReport {
+    pub safe: bool,
+    pub waypoints: usize,
+    pub duration_s: f64,
+    pub ticks: usize,
+    pub rate_hz: f64,
+    pub speed_scale: f64,
+    pub captures: usize,
+    pub joints: Vec<JointPeaks>,
+    pub clearances: Vec<Clearance>,
+    pub violations: Vec<Violation>,
+    /// Things worth knowing that are not unsafe (e.g. two captures falling on one tick).
+    pub warnings: Vec<String>,
+}
+
+impl PreflightReport {
+    /// True when no rule is broken.
+    pub fn is_safe(&self) -> bool {
+        self.violations.is_empty()
+    }
+}
+
+/// The running minimum of one clearance.
+#[derive(Clone, Copy)]
+struct MinTrack {
+    value: f64,
+    tick: usize,
+    capsule: usize,
+}
+
+impl MinTrack {
+    const NONE: MinTrack = MinTrack { value: f64::INFINITY, tick: 0, capsule: 0 };
+
+    fn offer(&mut self, value: f64, tick: usize, capsule: usize) {
+        // A NaN is taken and then kept, so it can never hide.
+        if value.is_nan() || value < self.value {
+            *self = MinTrack { value, tick, capsule };
+        }
+    }
+}
+
+/// Run every preflight rule over `table` (built from `traj`) in `lab`.
+pub fn check(traj: &Trajectory, table: &SetpointTable, lab: &LabConfig) -> PreflightReport {
+    let ticks = table.ticks();
+    let waypoint_of =
+        |tick: usize| table.waypoint_ticks.partition_point(|w| *w <= tick).saturating_sub(1);
+    let mut violations = Vec::new();
+
+    // Joint rules.
+    let mut joints = Vec::with_capacity(DOF);
+    let margin = lab.margins.joint_limit_rad;
+    for j in 0..DOF {
+        let (lo, hi) = (JOINT_LIMITS[j].0 + margin, JOINT_LIMITS[j].1 - margin);
+        let (mut min, mut max) = ((f64::INFINITY, 0), (f64::NEG_INFINITY, 0));
+        let mut worst_out = (0.0f64, 0usize);
+        let peak = |x: &[[f64; DOF]]| {
+            x.iter().enumerate().fold((0.0f64, 0usize), |(m, at), (k, v)| {
+                if v[j].is_nan() || v[j].abs() > m {
+                    (v[j].abs(), k)
+                } else {
+                    (m, at)
+                }
+            })
+        };
+        let mut step = (0.0f64, 0usize);
+        for (k, q) in table.q.iter().enumerate() {
+            let v = q[j];
+            if v < min.0 {
+                min = (v, k);
+            }
+            if v > max.0 {
+                max = (v, k);
+            }
+            let out = if v.is_nan() { f64::INFINITY } else { (lo - v).max(v - hi) };
+            if out > worst_out.0 {
+                worst_out = (out, k);
+            }
+            if k > 0 {
+                let s = (v - table.q[k - 1][j]).abs();
+                if s.is_nan() || s > step.0 {
+                    step = (s, k);
+                }
+            }
+        }
+        let (vel, vel_at) = peak(&table.qd);
+        let (acc, acc_at) = peak(&table.qdd);
+        let (jerk, jerk_at) = peak(&table.jerk);
+        let limits = &lab.limits;
+        let joint = j + 1;
+        let mut violate = |rule: Rule, message: String, tick: usize| {
+            violations.push(Violation {
+                rule,
+                message,
+                tick,
+                time_s: table.time_of(tick),
+                waypoint: waypoint_of(tick),
+                joint: Some(joint),
+                surface: None,
+                capsule: None,
+            });
+        };
+        if worst_out.0 > 0.0 {
+            let k = worst_out.1;
+            violate(
+                Rule::JointLimit,
+                format!(
+                    "joint {joint} reaches {:.4} rad at tick {k} ({:.3} s, near waypoint {}): \
+                     outside its allowed range [{lo:.4}, {hi:.4}] rad (xArm7 limits less a \
+                     {margin} rad margin)",
+                    table.q[k][j],
+                    table.time_of(k),
+                    waypoint_of(k)
+                ),
+                k,
+            );
+        }
+        let mut over = |rule: Rule, what: &str, unit: &str, peak: f64, at: usize, limit: f64| {
+            if peak.is_nan() || peak > limit {
+                violate(
+                    rule,
+                    format!(
+                        "joint {joint} {what} {peak:.4} {unit} at tick {at} ({:.3} s, near \
+                         waypoint {}) exceeds the limit {limit} {unit}",
+                        table.time_of(at),
+                        waypoint_of(at)
+                    ),
+                    at,
+                );
+            }
+        };
+        over(Rule::Velocity, "velocity", "rad/s", vel, vel_at, limits.velocity_rad_s[j]);
+        over(
+            Rule::Acceleration,
+            "acceleration",
+            "rad/s^2",
+            acc,
+            acc_at,
+            limits.acceleration_rad_s2[j],
+        );
+        over(Rule::Jerk, "jerk", "rad/s^3", jerk, jerk_at, limits.jerk_rad_s3[j]);
+        over(
+            Rule::Step,
+            &format!("step between setpoints at {} Hz", table.rate_hz),
+            "rad",
+            step.0,
+            step.1,
+            limits.max_step_rad,
+        );
+        joints.push(JointPeaks {
+            joint,
+            min_rad: min.0,
+            max_rad: max.0,
+            allowed_min_rad: lo,
+            allowed_max_rad: hi,
+            peak_velocity: vel,
+            velocity_limit: limits.velocity_rad_s[j],
+            peak_acceleration: acc,
+            acceleration_limit: limits.acceleration_rad_s2[j],
+            peak_jerk: jerk,
+            jerk_limit: limits.jerk_rad_s3[j],
+            peak_step_rad: step.0,
+            step_limit_rad: limits.max_step_rad,
+        });
+    }
+
+    // Clearance rules, every tick.
+    let mount = lab.camera_mount();
+    let body = lab.camera.body;
+    let base_in_lab = lab.base_in_lab();
+    let (lo, hi) = lab.enclosure_box();
+    let keepouts = lab.keepouts_base();
+    let target = lab.target_position_base();
+    let mut faces = [MinTrack::NONE; 6];
+    let mut keep = [MinTrack::NONE; 3];
+    let mut camera = MinTrack::NONE;
+    for (k, q) in table.q.iter().enumerate() {
+        let capsules = kinematics::arm_capsules(q, &mount, &body);
+        for (c, cap) in capsules.iter().enumerate() {
+            let in_lab: Capsule = cap.transformed(&base_in_lab);
+            for (f, d) in in_lab.box_clearances(&lo, &hi).iter().enumerate() {
+                if !(c == BASE && f == FLOOR) {
+                    faces[f].offer(*d, k, c);
+                }
+            }
+            for (i, (_, ko)) in keepouts.iter().enumerate() {
+                keep[i].offer(cap.distance_to(ko), k, c);
+            }
+        }
+        let optical = Point3::from(kinematics::camera_pose(q, &mount).translation.vector);
+        camera.offer((optical - target).norm(), k, CAPSULE_NAMES.len() - 1);
+    }
+    let mut clearances = Vec::with_capacity(10);
+    let mut add = |surface: String, track: MinTrack, required: f64, rule: Rule| {
+        let capsule = CAPSULE_NAMES[track.capsule].to_string();
+        let k = track.tick;
+        if track.value.is_nan() || track.value < required {
+            let what = if rule == Rule::CameraTargetDistance {
+                format!(
+                    "camera optical centre comes {:.4} m from the target centre (minimum {required} m)",
+                    track.value
+                )
+            } else {
+                format!(
+                    "capsule '{capsule}' comes {:.4} m from the {surface} (clearance required {required} m)",
+                    track.value
+                )
+            };
+            violations.push(Violation {
+                rule,
+                message: format!(
+                    "{what} at tick {k} ({:.3} s, near waypoint {})",
+                    table.time_of(k),
+                    waypoint_of(k)
+                ),
+                tick: k,
+                time_s: table.time_of(k),
+                waypoint: waypoint_of(k),
+                joint: None,
+                surface: Some(surface.clone()),
+                capsule: Some(capsule.clone()),
+            });
+        }
+        clearances.push(Clearance {
+            surface,
+            min_m: track.value,
+            required_m: required,
+            tick: k,
+            time_s: table.time_of(k),
+            capsule,
+        });
+    };
+    for (f, track) in faces.iter().enumerate() {
+        add(FACE_NAMES[f].to_string(), *track, lab.margins.wall_m, Rule::Wall);
+    }
+    for (i, track) in keep.iter().enumerate() {
+        add(format!("keep-out {}", keepouts[i].0), *track, lab.margins.keepout_m, Rule::KeepOut);
+    }
+    add(
+        "camera-target distance".into(),
+        camera,
+        lab.camera.min_target_distance_m,
+        Rule::CameraTargetDistance,
+    );
+
+    let mut warnings = Vec::new();
+    let shared = table.captures.windows(2).filter(|w| w[0].tick == w[1].tick).count();
+    if shared > 0 {
+        warnings.push(format!(
+            "{shared} capture waypoint(s) fall on the same tick as the previous capture at {} Hz; \
+             they fire once",
+            table.rate_hz
+        ));
+    }
+    PreflightReport {
+        safe: violations.is_empty(),
+        waypoints: traj.len(),
+        duration_s: table.duration_s,
+        ticks,
+        rate_hz: table.rate_hz,
+        speed_scale: table.speed_scale,
+        captures: traj.capture_count(),
+        joints,
+        clearances,
+        violations,
+        warnings,
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use std::f64::consts::PI;
+
+    /// A pose that looks straight at the default target from 0.29 m, every capsule at least
+    /// 0.25 m from the keep-outs.
+    const LOOK: [f64; DOF] = [0.0, -0.4, 0.0, 1.4, 0.0, 1.5, 0.0];
+
+    /// Small smooth motion around [`LOOK`], at rest at both ends.
+    fn comfortable(n: usize, step: f64, amplitude: f64) -> Trajectory {
+        let t: Vec<f64> = (0..n).map(|i| i as f64 * step).collect();
+        let span = t[n - 1];
+        let qpos = t
+            .iter()
+            .map(|x| {
+                let mut q = LOOK;
+                for (j, v) in q.iter_mut().enumerate() {
+                    *v += amplitude * (1.0 + j as f64 / 7.0) * (PI * x / span).sin().powi(2);
+                }
+                q
+            })
+            .collect();
+        Trajectory { qpos, t, ..Default::default() }
+    }
+
+    fn run(traj: &Trajectory, lab: &LabConfig, rate: f64) -> PreflightReport {
+        let table = SetpointTable::build(traj, rate, 1.0).expect("table");
+        check(traj, &table, lab)
+    }
+
+    #[test]
+    fn a_comfortable_motion_is_safe_in_the_default_lab() {
+        let r = run(&comfortable(21, 0.2, 0.1), &LabConfig::default(), 250.0);
+        assert!(r.is_safe(), "{:#?}", r.violations);
+        assert_eq!(r.clearances.len(), 10);
+        assert!(r.clearances.iter().all(|c| c.min_m.is_finite()));
+        assert_eq!(r.joints.len(), DOF);
+        assert!(r.joints[0].peak_velocity > 0.0);
+    }
+
+    #[test]
+    fn a_joint_beyond_its_limit_is_named() {
+        let mut traj = comfortable(11, 0.2, 0.05);
+        // Joint 4's lower limit is -0.19 rad: push the middle waypoints below it.
+        for q in &mut traj.qpos[4..7] {
+            q[3] = -0.3;
+        }
+        let r = run(&traj, &LabConfig::default(), 250.0);
+        let v = r.violations.iter().find(|v| v.rule == Rule::JointLimit).expect("limit");
+        assert_eq!(v.joint, Some(4));
+        assert!(
+            v.message.contains("joint 4") && v.message.contains("allowed range"),
+            "{}",
+            v.message
+        );
+    }
+
+    #[test]
+    fn a_step_too_large_for_the_rate_is_named() {
+        // 0.8 rad/s peak is inside the velocity limit but makes 0.016 rad steps at 50 Hz.
+        let mut traj = comfortable(3, 0.5, 0.0);
+        traj.t = vec![0.0, 1.0, 2.0];
+        traj.qpos[1][0] = 0.5;
+        let mut lab = LabConfig::default();
+        lab.limits.jerk_rad_s3 = [1000.0; DOF];
+        lab.limits.acceleration_rad_s2 = [100.0; DOF];
+        let r = run(&traj, &lab, 50.0);
+        let rules: Vec<Rule> = r.violations.iter().map(|v| v.rule).collect();
+        assert_eq!(rules, vec![Rule::Step], "{:#?}", r.violations);
+        assert!(r.violations[0].message.contains("50 Hz"));
+        // The same motion at 250 Hz makes small steps.
+        assert!(run(&traj, &lab, 250.0).is_safe());
+    }
+
+    #[test]
+    fn walls_and_keepouts_are_checked_per_capsule() {
+        // Move the arm base next to the x- wall: the links must come too close to it.
+        let mut lab = LabConfig::default();
+        lab.arm.base_in_lab_m[0] = 0.1;
+        let r = run(&comfortable(5, 0.2, 0.0), &lab, 250.0);
+        let v = r.violations.iter().find(|v| v.rule == Rule::Wall).expect("wall");
+        assert_eq!(v.surface.as_deref(), Some("wall x-"));
+        // And put the target keep-out where the hand is.
+        let mut lab = LabConfig::default();
+        let hand = kinematics::flange_pose(&LOOK).translation.vector;
+        lab.target.position_base_m = [hand.x, hand.y, hand.z];
+        let r = run(&comfortable(5, 0.2, 0.0), &lab, 250.0);
+        let rules: Vec<Rule> = r.violations.iter().map(|v| v.rule).collect();
+        assert!(rules.contains(&Rule::KeepOut), "{rules:?}");
+        assert!(rules.contains(&Rule::CameraTargetDistance), "{rules:?}");
+        let floor = r.clearances.iter().find(|c| c.surface == "floor").expect("floor");
+        assert_ne!(floor.capsule, "base", "the base capsule is exempt from the floor");
+    }
+}
