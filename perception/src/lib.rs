@@ -1,1 +1,31 @@
-//! (being built: see the issues)
+//! `hitl-perception`: the pose-estimation side of the testbed.
+//!
+//! Every captured frame goes to an asynchronous [`worker`] that runs one [`PoseEstimator`]
+//! backend (the built-in model-based [`icp`] tracker, or an [`onnx`] model) and emits a
+//! target-in-camera pose stamped with the frame's timestamp. [`metrics`] scores estimates against
+//! ground truth exactly as the DreamSat-Bench paper does; [`normalize`] is the paper's depth
+//! normalisation; [`models`] holds the target meshes (procedural spacecraft and the user's
+//! OBJ/STL). All poses are 4x4 rigid transforms from the target (model) frame to the camera frame,
+//! OpenCV camera axes (x right, y down, z forward), metres of the scene the camera sees.
+
+pub mod bench;
+pub mod error;
+pub mod estimator;
+pub mod frame;
+pub mod icp;
+pub mod metrics;
+pub mod models;
+pub mod normalize;
+pub mod onnx;
+pub mod pnp;
+pub mod pose;
+pub mod socket;
+pub mod testing;
+pub mod worker;
+
+pub use error::PerceptionError;
+pub use estimator::{backend_from_spec, BackendSpec, Estimate, EstimateKind, PoseEstimator};
+pub use frame::PerceptionFrame;
+pub use metrics::{evaluate, FrameError, Metrics, PosePair};
+pub use models::{Mesh, SymmetryClass, TargetModel};
+pub use worker::{spawn_worker, PoseResult, ReregisterPolicy, WorkerHandle, WorkerStats};

@@ -1,0 +1,138 @@
+//! Point-to-plane ICP: scene points (camera frame) against the model's surface samples, trimmed
+//! correspondences, Gauss-Newton steps in a frame centred on the scene centroid.
+
+use super::cloud::centroid;
+use super::model::ModelCloud;
+use crate::pose::{self, Pose};
+use nalgebra::{Matrix6, Vector3, Vector6};
+
+/// How an alignment ended.
+#[derive(Debug, Clone, Copy)]
+pub struct Fit {
+    pub pose: Pose,
+    /// Fraction of scene points within the inlier tolerance of the model.
+    pub inlier_frac: f64,
+    /// RMS point-to-plane distance of the inliers, metres.
+    pub rms: f64,
+}
+
+/// Refines `init` with up to `iters` point-to-plane steps. `max_dist` bounds correspondences at
+/// the start; later the bound follows 3x the median distance (not below `tol`).
+pub fn align(
+    model: &ModelCloud,
+    scene: &[Vector3<f64>],
+    init: &Pose,
+    iters: usize,
+    max_dist: f64,
+    tol: f64,
+    facing: bool,
+) -> Fit {
+    let mut t = *init;
+    let c = centroid(scene);
+    let mut bound = max_dist;
+    let mut pairs: Vec<(Vector3<f64>, usize, f64)> = Vec::with_capacity(scene.len());
+    let mut dists: Vec<f64> = Vec::with_capacity(scene.len());
+    for _ in 0..iters {
+        let r = pose::rotation(&t);
+        let tr = pose::translation(&t);
+        let rt = r.transpose();
+        let view_body = |s: &Vector3<f64>| -(rt * s).normalize();
+        pairs.clear();
+        dists.clear();
+        for s in scene {
+            let sb = rt * (s - tr);
+            let (i, d2) = if facing {
+                model.nearest_facing(&sb, &view_body(s), 4)
+            } else {
+                model.nearest(&sb)
+            };
+            let d = d2.sqrt();
+            dists.push(d);
+            pairs.push((*s, i, d));
+        }
+        let mut sorted = dists.clone();
+        sorted.sort_by(|a, b| a.total_cmp(b));
+        let med = sorted.get(sorted.len() / 2).copied().unwrap_or(0.0);
+        bound = bound.min((3.0 * med).max(tol));
+        let mut a = Matrix6::<f64>::zeros();
+        let mut b = Vector6::<f64>::zeros();
+        let mut used = 0usize;
+        for (s, i, d) in &pairs {
+            if *d > bound {
+                continue;
+            }
+            let m = r * model.points[*i] + tr;
+            let n = r * model.normals[*i];
+            let arm = m - c;
+            let r0 = n.dot(&(m - s));
+            let j = Vector6::new(
+                arm.y * n.z - arm.z * n.y,
+                arm.z * n.x - arm.x * n.z,
+                arm.x * n.y - arm.y * n.x,
+                n.x,
+                n.y,
+                n.z,
+            );
+            a += j * j.transpose();
+            b += j * r0;
+            used += 1;
+        }
+        if used < 6 {
+            break;
+        }
+        let damping = 1e-9 * a.trace().max(1e-30);
+        for k in 0..6 {
+            a[(k, k)] += damping;
+        }
+        let Some(x) = a.cholesky().map(|ch| ch.solve(&(-b))) else {
+            break;
+        };
+        let w = Vector3::new(x[0], x[1], x[2]);
+        let v = Vector3::new(x[3], x[4], x[5]);
+        let step = pose::small_motion(&w, &v);
+        let to_c = pose::from_rt(&nalgebra::Matrix3::identity(), &c);
+        let from_c = pose::from_rt(&nalgebra::Matrix3::identity(), &(-c));
+        t = to_c * step * from_c * t;
+        // Re-orthonormalise against accumulated rounding.
+        let rot = nalgebra::Rotation3::from_matrix(&pose::rotation(&t));
+        t = pose::from_rt(rot.matrix(), &pose::translation(&t));
+        if w.norm() < 1e-9 && v.norm() < 1e-9 * model.diameter {
+            break;
+        }
+    }
+    let (inlier_frac, rms) = quality(model, scene, &t, tol, facing);
+    Fit { pose: t, inlier_frac, rms }
+}
+
+/// Inlier fraction (nearest-sample distance <= `tol`) and RMS point-to-plane distance of inliers.
+pub fn quality(
+    model: &ModelCloud,
+    scene: &[Vector3<f64>],
+    t: &Pose,
+    tol: f64,
+    facing: bool,
+) -> (f64, f64) {
+    if scene.is_empty() {
+        return (0.0, f64::NAN);
+    }
+    let r = pose::rotation(t);
+    let tr = pose::translation(t);
+    let rt = r.transpose();
+    let mut inliers = 0usize;
+    let mut sq = 0.0;
+    for s in scene {
+        let sb = rt * (s - tr);
+        let (i, d2) = if facing {
+            model.nearest_facing(&sb, &(-(rt * s).normalize()), 4)
+        } else {
+            model.nearest(&sb)
+        };
+        if d2.sqrt() <= tol {
+            inliers += 1;
+            let e = model.normals[i].dot(&(sb - model.points[i]));
+            sq += e * e;
+        }
+    }
+    let rms = if inliers > 0 { (sq / inliers as f64).sqrt() } else { f64::NAN };
+    (inliers as f64 / scene.len() as f64, rms)
+}

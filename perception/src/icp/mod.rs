@@ -1,0 +1,287 @@
+//! `icp`: the built-in model-based tracker (CPU). Depth + mask + the target mesh in, pose out.
+//!
+//! - First frame, after `reset`, or when tracking fails: global registration over a rotation
+//!   hypothesis grid ([`global`]), each refined briefly by ICP and the best scored against the
+//!   image (silhouette and free space, [`score`]).
+//! - Other frames: point-to-plane ICP ([`align`]) from a constant-velocity prediction of the
+//!   previous pose. Correspondences go from the visible scene to the nearest camera-facing model
+//!   sample, so partial views (the target cut by the image border or self-occluded) only constrain
+//!   what is seen.
+//! - A track is declared failed when too few scene points fit the model, the projected model
+//!   leaves the silhouette, or it sits in front of observed free space; then the tracker
+//!   re-registers on the same frame and reports `Lost` if that fails too.
+//!
+//! Every threshold is relative to the model's size, so the tracker is scale-equivariant (the
+//! paper's depth normalisation changes nothing but rounding).
+
+pub mod align;
+pub mod cloud;
+pub mod global;
+pub mod model;
+pub mod score;
+
+use crate::estimator::{Estimate, EstimateKind, PoseEstimator, ScalableEstimator};
+use crate::models::Mesh;
+use crate::pose::{self, Pose};
+use crate::{PerceptionError, PerceptionFrame};
+use align::{align, Fit};
+use model::ModelCloud;
+use nalgebra::{Matrix3, Vector3};
+
+/// Tuning of the tracker. Distances are fractions of the model's bounding-box diagonal `D`.
+#[derive(Debug, Clone, PartialEq)]
+pub struct IcpConfig {
+    /// Surface samples of the model.
+    pub model_points: usize,
+    /// Scene points used for tracking and final refinement.
+    pub scene_points: usize,
+    /// Scene points used to try each rotation hypothesis.
+    pub coarse_points: usize,
+    /// Viewing directions and in-plane angles of the hypothesis grid.
+    pub views: usize,
+    pub inplane: usize,
+    /// ICP iterations per hypothesis, and for tracking / final refinement.
+    pub coarse_iters: usize,
+    pub track_iters: usize,
+    /// Hypotheses kept after the first stage, and for full refinement.
+    pub coarse_keep: usize,
+    pub keep: usize,
+    /// Inlier tolerance = `tol_spacing` x sample spacing + `tol_rel` x D.
+    pub tol_spacing: f64,
+    pub tol_rel: f64,
+    /// Largest frame-to-frame motion tracked without re-registration, x D.
+    pub track_max_dist_rel: f64,
+    /// Acceptance: inlier fraction, silhouette fraction, free-space violation fraction.
+    pub min_inlier_frac: f64,
+    pub min_silhouette: f64,
+    pub max_violation: f64,
+    /// Fewer target points than this: no estimate.
+    pub min_scene_points: usize,
+}
+
+impl Default for IcpConfig {
+    fn default() -> Self {
+        IcpConfig {
+            model_points: 4000,
+            scene_points: 1000,
+            coarse_points: 120,
+            views: 60,
+            inplane: 8,
+            coarse_iters: 8,
+            track_iters: 30,
+            coarse_keep: 24,
+            keep: 4,
+            tol_spacing: 1.5,
+            tol_rel: 0.005,
+            track_max_dist_rel: 0.1,
+            min_inlier_frac: 0.7,
+            min_silhouette: 0.8,
+            max_violation: 0.05,
+            min_scene_points: 30,
+        }
+    }
+}
+
+/// The built-in tracker.
+pub struct IcpTracker {
+    cfg: IcpConfig,
+    model: ModelCloud,
+    grid: Vec<Matrix3<f64>>,
+    /// Camera-facing surface centroid of the model under each grid rotation.
+    fronts: Vec<Vector3<f64>>,
+    prev: Option<Pose>,
+    prev2: Option<Pose>,
+    /// Hypothesis used for re-registration after a lost track (to keep a symmetric target on the
+    /// same branch).
+    last_good: Option<Pose>,
+}
+
+/// Outcome of one full check of a pose.
+#[derive(Debug, Clone, Copy)]
+struct Scored {
+    fit: Fit,
+    silhouette: f64,
+    violation: f64,
+}
+
+impl Scored {
+    fn score(&self) -> f64 {
+        self.fit.inlier_frac * self.silhouette * (1.0 - self.violation)
+    }
+}
+
+impl IcpTracker {
+    /// A tracker for `mesh` given at the scale the camera sees it (lab metres).
+    pub fn new(mesh: &Mesh, cfg: IcpConfig) -> Result<IcpTracker, PerceptionError> {
+        let model = ModelCloud::from_mesh(mesh, cfg.model_points)?;
+        let grid = global::rotation_grid(cfg.views, cfg.inplane);
+        let fronts = grid.iter().map(|r| global::front_centroid(&model, r)).collect();
+        Ok(IcpTracker { cfg, model, grid, fronts, prev: None, prev2: None, last_good: None })
+    }
+
+    pub fn config(&self) -> &IcpConfig {
+        &self.cfg
+    }
+
+    fn tol(&self) -> f64 {
+        self.cfg.tol_spacing * self.model.spacing + self.cfg.tol_rel * self.model.diameter
+    }
+
+    fn full_check(&self, frame: &PerceptionFrame, scene: &[Vector3<f64>], init: &Pose) -> Scored {
+        let d = self.model.diameter;
+        let fit = align(
+            &self.model,
+            scene,
+            init,
+            self.cfg.track_iters,
+            self.cfg.track_max_dist_rel * d,
+            self.tol(),
+            true,
+        );
+        let img = score::check(&self.model, frame, &fit.pose, self.tol());
+        Scored { fit, silhouette: img.silhouette, violation: img.violation }
+    }
+
+    fn acceptable(&self, s: &Scored) -> bool {
+        s.fit.inlier_frac >= self.cfg.min_inlier_frac
+            && s.silhouette >= self.cfg.min_silhouette
+            && s.violation <= self.cfg.max_violation
+            && pose::is_rigid(&s.fit.pose)
+    }
+
+    /// Global registration on this frame; the best hypothesis (acceptable or not).
+    ///
+    /// Three stages, each keeping the best-ranked hypotheses of the previous one: every grid
+    /// rotation gets a few ICP steps on a sparse cloud; the best `coarse_keep` get more steps on a
+    /// denser one; the best `keep` are refined fully. Ranking = inlier fraction x silhouette x
+    /// (1 - free-space violation).
+    fn register(&self, frame: &PerceptionFrame, scene: &[Vector3<f64>]) -> Option<Scored> {
+        let sparse = cloud::thin(scene, self.cfg.coarse_points / 2);
+        let dense = cloud::thin(scene, self.cfg.coarse_points * 2);
+        let c = cloud::centroid(&sparse);
+        let d = self.model.diameter;
+        let tol = self.tol();
+        let rank = |cloud: &[Vector3<f64>], init: &Pose, iters: usize, max_dist: f64| {
+            let fit = align(&self.model, cloud, init, iters, max_dist, 2.0 * tol, false);
+            let img = score::check_strided(&self.model, frame, &fit.pose, 2.0 * tol, 16);
+            (fit.inlier_frac * img.silhouette * (1.0 - img.violation), fit.pose)
+        };
+        let t0 = std::time::Instant::now();
+        let mut cands: Vec<(f64, Pose)> = self
+            .grid
+            .iter()
+            .zip(&self.fronts)
+            .map(|(r, front)| rank(&sparse, &pose::from_rt(r, &(c - front)), 4, 0.3 * d))
+            .collect();
+        cands.sort_by(|a, b| b.0.total_cmp(&a.0));
+        cands.truncate(self.cfg.coarse_keep);
+        if std::env::var_os("HITL_ICP_DEBUG").is_some() {
+            eprintln!("icp stage 1 {:?}", t0.elapsed());
+        }
+        let mut cands: Vec<(f64, Pose)> =
+            cands.iter().map(|(_, p)| rank(&dense, p, self.cfg.coarse_iters, 0.15 * d)).collect();
+        cands.sort_by(|a, b| b.0.total_cmp(&a.0));
+        cands.truncate(self.cfg.keep);
+        if std::env::var_os("HITL_ICP_DEBUG").is_some() {
+            let s: Vec<String> = cands.iter().map(|c| format!("{:.3}", c.0)).collect();
+            eprintln!("icp registration candidates: {} ({:?})", s.join(" "), t0.elapsed());
+        }
+        let mut best: Option<Scored> = None;
+        for (_, p) in &cands {
+            let s = self.full_check(frame, scene, p);
+            if best.is_none_or(|b| s.score() > b.score()) {
+                best = Some(s);
+            }
+        }
+        // Prefer staying on the branch of the last good pose (symmetric targets) when it scores
+        // as well as the best hypothesis.
+        if let Some(lg) = self.last_good {
+            let s = self.full_check(frame, scene, &lg);
+            if best.is_none_or(|b| s.score() >= b.score() - 0.02) && self.acceptable(&s) {
+                best = Some(s);
+            }
+        }
+        best
+    }
+
+    fn accept(&mut self, s: &Scored, kind: EstimateKind) -> Estimate {
+        self.prev2 = self.prev;
+        self.prev = Some(s.fit.pose);
+        self.last_good = Some(s.fit.pose);
+        Estimate { pose: Some(s.fit.pose), kind, residual_m: s.fit.rms }
+    }
+
+    fn lose(&mut self) -> Estimate {
+        self.prev = None;
+        self.prev2 = None;
+        Estimate::lost()
+    }
+}
+
+impl PoseEstimator for IcpTracker {
+    fn name(&self) -> String {
+        "icp".into()
+    }
+
+    fn estimate(&mut self, frame: &PerceptionFrame) -> Result<Estimate, PerceptionError> {
+        frame.validate()?;
+        let scene = cloud::scene_points(frame, self.cfg.scene_points);
+        if scene.len() < self.cfg.min_scene_points {
+            return Ok(self.lose());
+        }
+        if let Some(prev) = self.prev {
+            let pred = match self.prev2 {
+                Some(p2) => prev * pose::inverse(&p2) * prev,
+                None => prev,
+            };
+            let mut s = self.full_check(frame, &scene, &pred);
+            if !self.acceptable(&s) && pred != prev {
+                s = self.full_check(frame, &scene, &prev);
+            }
+            if self.acceptable(&s) {
+                return Ok(self.accept(&s, EstimateKind::Tracked));
+            }
+        }
+        let reg = self.register(frame, &scene);
+        if std::env::var_os("HITL_ICP_DEBUG").is_some() {
+            if let Some(s) = &reg {
+                eprintln!(
+                    "icp register: inliers {:.3} rms {:.2e} silhouette {:.3} violation {:.3} scene {}",
+                    s.fit.inlier_frac,
+                    s.fit.rms,
+                    s.silhouette,
+                    s.violation,
+                    scene.len()
+                );
+            }
+        }
+        match reg {
+            Some(s) if self.acceptable(&s) => Ok(self.accept(&s, EstimateKind::Registered)),
+            _ => Ok(self.lose()),
+        }
+    }
+
+    fn reset(&mut self) {
+        self.prev = None;
+        self.prev2 = None;
+    }
+}
+
+impl ScalableEstimator for IcpTracker {
+    fn rescale_scene(&mut self, factor: f64) {
+        if factor == 1.0 || !(factor.is_finite() && factor > 0.0) {
+            return;
+        }
+        if let Ok(m) = self.model.scaled(factor) {
+            self.model = m;
+        }
+        for f in &mut self.fronts {
+            *f *= factor;
+        }
+        for p in [&mut self.prev, &mut self.prev2, &mut self.last_good].into_iter().flatten() {
+            for r in 0..3 {
+                p[(r, 3)] *= factor;
+            }
+        }
+    }
+}

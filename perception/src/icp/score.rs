@@ -1,0 +1,77 @@
+//! Image-space checks of a pose hypothesis against the frame: does the projected model fall inside
+//! the target's silhouette, and does it stay behind the observed surface (free space)?
+
+use super::model::ModelCloud;
+use crate::pose::{self, Pose};
+use crate::PerceptionFrame;
+
+/// Image-space agreement of a pose with the frame.
+#[derive(Debug, Clone, Copy)]
+pub struct ImageCheck {
+    /// Fraction of in-image model samples that land on (or next to) a target pixel.
+    pub silhouette: f64,
+    /// Fraction of those that lie in front of the observed surface by more than the tolerance.
+    pub violation: f64,
+}
+
+/// Projects every model sample at `t` and compares with the frame's target pixels and depth.
+pub fn check(model: &ModelCloud, frame: &PerceptionFrame, t: &Pose, tol: f64) -> ImageCheck {
+    check_strided(model, frame, t, tol, 1)
+}
+
+/// [`check`] on every `stride`-th model sample (for cheap hypothesis ranking).
+pub fn check_strided(
+    model: &ModelCloud,
+    frame: &PerceptionFrame,
+    t: &Pose,
+    tol: f64,
+    stride: usize,
+) -> ImageCheck {
+    let k = &frame.intrinsics;
+    let (w, h) = (k.width as i64, k.height as i64);
+    let r = pose::rotation(t);
+    let tr = pose::translation(t);
+    let (mut in_image, mut hits, mut violations) = (0usize, 0usize, 0usize);
+    for p in model.points.iter().step_by(stride.max(1)) {
+        let q = r * p + tr;
+        if q.z <= 0.0 {
+            continue;
+        }
+        let u = (k.fx * q.x / q.z + k.cx).round() as i64;
+        let v = (k.fy * q.y / q.z + k.cy).round() as i64;
+        if u < 0 || v < 0 || u >= w || v >= h {
+            continue;
+        }
+        in_image += 1;
+        // Rounding to a pixel can move a sample across an edge: judge it by its 3x3 neighbourhood
+        // (on the silhouette if any neighbour is target; in front of free space only if it is in
+        // front of every neighbouring target surface).
+        let mut near = false;
+        let mut nearest_surface = f64::INFINITY;
+        for dv in -1..=1 {
+            for du in -1..=1 {
+                let (uu, vv) = (u + du, v + dv);
+                if uu >= 0 && vv >= 0 && uu < w && vv < h {
+                    let j = (vv * w + uu) as usize;
+                    if frame.is_target(j) {
+                        near = true;
+                        nearest_surface = nearest_surface.min(frame.depth_m[j] as f64);
+                    }
+                }
+            }
+        }
+        if near {
+            hits += 1;
+            if q.z < nearest_surface - tol {
+                violations += 1;
+            }
+        }
+    }
+    if in_image == 0 {
+        return ImageCheck { silhouette: 0.0, violation: 1.0 };
+    }
+    ImageCheck {
+        silhouette: hits as f64 / in_image as f64,
+        violation: violations as f64 / in_image as f64,
+    }
+}

@@ -1,0 +1,218 @@
+//! The asynchronous perception worker (tokio).
+//!
+//! The capture path pushes frames into a bounded [`FrameQueue`] that never blocks: when it is
+//! full the OLDEST frame is dropped and counted (a lock-free `crossbeam` ring with
+//! `force_push`). One worker task takes frames in order and runs the backend on tokio's blocking
+//! pool, so the async threads never stall on a pose solve; each result goes out on a bounded
+//! channel stamped with the frame's timestamp (the lead writes it to `/pose/estimate`).
+//!
+//! Re-registration policy: the backend registers globally on the first frame and whenever it
+//! loses track (its own failure detection); the worker additionally resets it after a `Lost`
+//! frame, every `every_n_frames` frames and when the fit residual passes `max_residual_m`.
+
+use crate::estimator::{Estimate, PoseEstimator};
+use crate::PerceptionFrame;
+use crossbeam_queue::ArrayQueue;
+use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
+use std::sync::Arc;
+use tokio::sync::{mpsc, Notify};
+use tokio::task::JoinHandle;
+
+/// When the worker forces a fresh global registration.
+#[derive(Debug, Clone, Copy, PartialEq, Default)]
+pub struct ReregisterPolicy {
+    /// Reset the tracker every N frames handed to it (None: never).
+    pub every_n_frames: Option<u64>,
+    /// Reset the tracker when an estimate's fit residual exceeds this (drift signal).
+    pub max_residual_m: Option<f64>,
+}
+
+/// Counters of the worker, readable at any time.
+#[derive(Debug, Default)]
+pub struct WorkerStats {
+    pub pushed: AtomicU64,
+    /// Frames dropped because the queue was full (the oldest went).
+    pub dropped: AtomicU64,
+    pub estimated: AtomicU64,
+    pub lost: AtomicU64,
+    pub errors: AtomicU64,
+    /// Resets forced by the policy or by a lost frame.
+    pub resets: AtomicU64,
+    /// Results not delivered because the consumer had gone.
+    pub undelivered: AtomicU64,
+}
+
+impl WorkerStats {
+    pub fn to_json(&self) -> serde_json::Value {
+        let g = |a: &AtomicU64| a.load(Ordering::Relaxed);
+        serde_json::json!({
+            "pushed": g(&self.pushed), "dropped": g(&self.dropped), "estimated": g(&self.estimated),
+            "lost": g(&self.lost), "errors": g(&self.errors), "resets": g(&self.resets),
+            "undelivered": g(&self.undelivered),
+        })
+    }
+}
+
+/// One frame's result, stamped with the frame's timestamp.
+#[derive(Debug, Clone)]
+pub struct PoseResult {
+    pub timestamp_ns: u64,
+    pub seq: u64,
+    /// `Err` carries the backend's error message (bad frame, runtime failure).
+    pub estimate: Result<Estimate, String>,
+    /// Wall time the backend took, nanoseconds.
+    pub solve_ns: u64,
+}
+
+/// The bounded drop-oldest queue between the capture path and the worker.
+pub struct FrameQueue {
+    ring: ArrayQueue<PerceptionFrame>,
+    notify: Notify,
+    closed: AtomicBool,
+    stats: Arc<WorkerStats>,
+}
+
+impl FrameQueue {
+    fn new(capacity: usize, stats: Arc<WorkerStats>) -> Self {
+        FrameQueue {
+            ring: ArrayQueue::new(capacity.max(1)),
+            notify: Notify::new(),
+            closed: AtomicBool::new(false),
+            stats,
+        }
+    }
+
+    /// Hands a frame to the worker; never blocks. Returns true if an older frame was dropped.
+    pub fn push(&self, frame: PerceptionFrame) -> bool {
+        self.stats.pushed.fetch_add(1, Ordering::Relaxed);
+        let dropped = self.ring.force_push(frame).is_some();
+        if dropped {
+            self.stats.dropped.fetch_add(1, Ordering::Relaxed);
+        }
+        self.notify.notify_one();
+        dropped
+    }
+
+    /// Frames waiting.
+    pub fn len(&self) -> usize {
+        self.ring.len()
+    }
+
+    pub fn is_empty(&self) -> bool {
+        self.ring.is_empty()
+    }
+}
+
+/// The capture side's handle: push frames, read counters, close.
+#[derive(Clone)]
+pub struct WorkerHandle {
+    pub queue: Arc<FrameQueue>,
+    pub stats: Arc<WorkerStats>,
+}
+
+impl WorkerHandle {
+    /// Hands a frame over (never blocks; drops the oldest when full).
+    pub fn push(&self, frame: PerceptionFrame) -> bool {
+        self.queue.push(frame)
+    }
+
+    /// No more frames: the worker finishes the queued ones and ends.
+    pub fn close(&self) {
+        self.queue.closed.store(true, Ordering::Release);
+        self.queue.notify.notify_one();
+    }
+}
+
+/// Starts the worker on the current tokio runtime. Results go to the returned receiver
+/// (capacity `results_capacity`; a slow consumer stalls only the worker, whose queue then drops).
+pub fn spawn_worker(
+    estimator: Box<dyn PoseEstimator>,
+    queue_capacity: usize,
+    results_capacity: usize,
+    policy: ReregisterPolicy,
+) -> (WorkerHandle, mpsc::Receiver<PoseResult>, JoinHandle<()>) {
+    let stats = Arc::new(WorkerStats::default());
+    let queue = Arc::new(FrameQueue::new(queue_capacity, stats.clone()));
+    let (tx, rx) = mpsc::channel(results_capacity.max(1));
+    let handle = WorkerHandle { queue: queue.clone(), stats: stats.clone() };
+    let task = tokio::spawn(run(estimator, queue, stats, tx, policy));
+    (handle, rx, task)
+}
+
+async fn run(
+    mut estimator: Box<dyn PoseEstimator>,
+    queue: Arc<FrameQueue>,
+    stats: Arc<WorkerStats>,
+    tx: mpsc::Sender<PoseResult>,
+    policy: ReregisterPolicy,
+) {
+    let mut handed: u64 = 0;
+    loop {
+        let frame = match queue.ring.pop() {
+            Some(f) => f,
+            None => {
+                if queue.closed.load(Ordering::Acquire) {
+                    break;
+                }
+                // A push between pop() and here leaves a stored permit, so this cannot hang.
+                queue.notify.notified().await;
+                continue;
+            }
+        };
+        if let Some(n) = policy.every_n_frames.filter(|&n| n > 0) {
+            if handed > 0 && handed.is_multiple_of(n) {
+                estimator.reset();
+                stats.resets.fetch_add(1, Ordering::Relaxed);
+            }
+        }
+        handed += 1;
+        let (ts, seq) = (frame.timestamp_ns, frame.seq);
+        let joined = tokio::task::spawn_blocking(move || {
+            let t0 = std::time::Instant::now();
+            let r = estimator.estimate(&frame);
+            (estimator, r, t0.elapsed().as_nanos() as u64)
+        })
+        .await;
+        let (est, result, solve_ns) = match joined {
+            Ok(v) => v,
+            Err(e) => {
+                // The backend panicked: nothing left to run; report and stop.
+                stats.errors.fetch_add(1, Ordering::Relaxed);
+                let _ = tx
+                    .send(PoseResult {
+                        timestamp_ns: ts,
+                        seq,
+                        estimate: Err(format!("perception backend panicked: {e}")),
+                        solve_ns: 0,
+                    })
+                    .await;
+                return;
+            }
+        };
+        estimator = est;
+        let estimate = match result {
+            Ok(e) => {
+                stats.estimated.fetch_add(1, Ordering::Relaxed);
+                let drift = policy
+                    .max_residual_m
+                    .is_some_and(|m| e.residual_m.is_finite() && e.residual_m > m);
+                if e.pose.is_none() {
+                    stats.lost.fetch_add(1, Ordering::Relaxed);
+                }
+                if e.pose.is_none() || drift {
+                    estimator.reset();
+                    stats.resets.fetch_add(1, Ordering::Relaxed);
+                }
+                Ok(e)
+            }
+            Err(err) => {
+                stats.errors.fetch_add(1, Ordering::Relaxed);
+                Err(err.to_string())
+            }
+        };
+        let r = PoseResult { timestamp_ns: ts, seq, estimate, solve_ns };
+        if tx.send(r).await.is_err() {
+            stats.undelivered.fetch_add(1, Ordering::Relaxed);
+        }
+    }
+}
