@@ -15,3 +15,7 @@ pub mod mjcf;
 pub mod mujoco_plant;
 pub mod plant;
 pub mod server;
+
+pub use faults::{Fault, FaultKind, SimInputs, SimInputsReader};
+pub use server::bench::{bench_protocol, BenchError, BenchOptions};
+pub use server::{Stub, StubConfig, StubError, StubHandle};

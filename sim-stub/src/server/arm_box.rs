@@ -1,0 +1,444 @@
+//! The control box's state machine over a [`Plant`]: motors, states, modes, error and warning
+//! codes, servo and joint moves, joint-limit and collision errors, and the replies it gives.
+//!
+//! Pure logic: no sockets, no threads. The command server calls [`ArmBox::handle`] for every
+//! request; the stepping thread calls [`ArmBox::step`] every physics step.
+
+use crate::plant::{Collision, Plant};
+use hitl_drivers::xarm::codes;
+use hitl_drivers::xarm::registers::{self as reg, arm_state, mode};
+use hitl_drivers::xarm::report::{BoxIdentity, ReportData};
+use hitl_hal::{Joints, DOF};
+use nalgebra::Vector3;
+
+/// Firmware version the stub answers (>= 1.10 so the SDK sends two-byte set_mode, and >= 1.8.6
+/// so it switches to protocol id 3 as with a current box).
+pub const VERSION: &str = "7,7,XS1303HITL01,XX1303HITL01,v2.5.0";
+/// Arm and control-box serial numbers.
+pub const ARM_SN: &str = "XS1303HITL01";
+pub const BOX_SN: &str = "XX1303HITL01";
+/// Joint speed above which the arm reports itself moving (state 1), rad/s.
+const MOVING_SPEED: f64 = 0.005;
+/// Largest reply data the box produces (get_joint_pos with positions, velocities, efforts).
+pub const MAX_REPLY_DATA: usize = 96;
+
+/// A reply: state byte and data.
+#[derive(Debug, Clone, Copy)]
+pub struct BoxReply {
+    pub state: u8,
+    pub len: usize,
+    pub data: [u8; MAX_REPLY_DATA],
+}
+
+impl BoxReply {
+    pub fn data(&self) -> &[u8] {
+        &self.data[..self.len]
+    }
+}
+
+/// What the box is doing, for handles and tests.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct BoxStatus {
+    pub enabled: bool,
+    pub state: u8,
+    pub mode: u8,
+    pub error_code: u8,
+    pub warn_code: u8,
+}
+
+/// The box: state machine plus the plant it drives.
+pub struct ArmBox {
+    plant: Box<dyn Plant>,
+    limits: [(f64, f64); DOF],
+    enabled: bool,
+    state: u8,
+    mode: u8,
+    error: u8,
+    warn: u8,
+    /// The position target last given to the plant.
+    target: Joints,
+    /// A planned joint move in mode 0: goal and joint speed (rad/s).
+    moving_to: Option<(Joints, f64)>,
+    /// Offset added to reported joints (deviation fault).
+    deviation: f64,
+    /// The e-stop input is pressed: error 2 cannot be cleared.
+    estop: bool,
+    /// The collision seen at the last step (errors are raised on a new contact only).
+    in_contact: bool,
+    /// The last collision that raised an error.
+    pub last_collision: Option<Collision>,
+    pub servo_commands: u64,
+    pub commands: u64,
+    /// Registers the box did not know (first 32), for diagnosis.
+    pub unknown_registers: Vec<u8>,
+    report_counter: u32,
+}
+
+fn put_f32s(out: &mut [u8], values: &[f64]) -> usize {
+    for (i, v) in values.iter().enumerate() {
+        out[4 * i..4 * i + 4].copy_from_slice(&(*v as f32).to_le_bytes());
+    }
+    4 * values.len()
+}
+
+fn read_joints(params: &[u8]) -> Option<Joints> {
+    if params.len() < 28 {
+        return None;
+    }
+    let mut q = [0.0; DOF];
+    for (j, v) in q.iter_mut().enumerate() {
+        let b = [params[4 * j], params[4 * j + 1], params[4 * j + 2], params[4 * j + 3]];
+        *v = f64::from(f32::from_le_bytes(b));
+    }
+    Some(q)
+}
+
+fn read_f32(params: &[u8], index: usize) -> Option<f64> {
+    let b = params.get(4 * index..4 * index + 4)?;
+    Some(f64::from(f32::from_le_bytes([b[0], b[1], b[2], b[3]])))
+}
+
+impl ArmBox {
+    /// A box at power-up: motors off, stopped, mode 0, the arm resting at `initial_q`.
+    pub fn new(mut plant: Box<dyn Plant>, initial_q: Joints, limits: [(f64, f64); DOF]) -> Self {
+        plant.reset(&initial_q);
+        Self {
+            plant,
+            limits,
+            enabled: false,
+            state: arm_state::STOPPED,
+            mode: mode::POSITION,
+            error: 0,
+            warn: 0,
+            target: initial_q,
+            moving_to: None,
+            deviation: 0.0,
+            estop: false,
+            in_contact: false,
+            last_collision: None,
+            servo_commands: 0,
+            commands: 0,
+            unknown_registers: Vec::new(),
+            report_counter: 0,
+        }
+    }
+
+    pub fn status(&self) -> BoxStatus {
+        BoxStatus {
+            enabled: self.enabled,
+            state: self.state,
+            mode: self.mode,
+            error_code: self.error,
+            warn_code: self.warn,
+        }
+    }
+
+    /// The plant, for the camera and tests.
+    pub fn plant_mut(&mut self) -> &mut dyn Plant {
+        self.plant.as_mut()
+    }
+
+    /// The plant's true joints (without injected deviation).
+    pub fn plant_joints(&self) -> Joints {
+        self.plant.joints()
+    }
+
+    /// Joints as the box reports them (with injected deviation).
+    pub fn reported_joints(&self) -> Joints {
+        let mut q = self.plant.joints();
+        for v in &mut q {
+            *v += self.deviation;
+        }
+        q
+    }
+
+    fn ready(&self) -> bool {
+        self.enabled
+            && self.error == 0
+            && matches!(self.state, arm_state::MOVING | arm_state::SLEEPING)
+    }
+
+    fn state_byte(&self) -> u8 {
+        let mut s = 0;
+        if self.error != 0 {
+            s |= reg::STATE_ERROR;
+        }
+        if self.warn != 0 {
+            s |= reg::STATE_WARNING;
+        }
+        if !self.ready() {
+            s |= reg::STATE_NOT_READY;
+        }
+        s
+    }
+
+    /// Hold the arm where it is.
+    fn hold(&mut self) {
+        self.moving_to = None;
+        self.target = self.plant.joints();
+        self.plant.command(&self.target);
+    }
+
+    /// Raise a controller error: the box stops the arm.
+    pub fn raise_error(&mut self, code: u8) {
+        if self.error == 0 {
+            self.error = code;
+        }
+        self.state = arm_state::STOPPED;
+        self.hold();
+    }
+
+    pub fn set_deviation(&mut self, rad: f64) {
+        self.deviation = rad;
+    }
+
+    /// The e-stop input changed: pressing it raises error 2 (emergency IO) and stops the arm.
+    pub fn set_estop(&mut self, pressed: bool) {
+        self.estop = pressed;
+        if pressed {
+            self.raise_error(codes::ERR_ESTOP_IO);
+            self.enabled = false;
+        }
+    }
+
+    fn beyond_limits(&self, q: &Joints) -> bool {
+        q.iter().zip(self.limits.iter()).any(|(v, (lo, hi))| !(*v >= *lo && *v <= *hi))
+    }
+
+    /// Answer one request.
+    pub fn handle(&mut self, register: u8, params: &[u8]) -> BoxReply {
+        self.commands += 1;
+        let mut data = [0u8; MAX_REPLY_DATA];
+        let mut invalid = false;
+        let len = match register {
+            reg::GET_VERSION => {
+                let v = VERSION.as_bytes();
+                data[..v.len()].copy_from_slice(v);
+                40
+            }
+            reg::GET_ROBOT_SN => {
+                let (a, b) = (ARM_SN.as_bytes(), BOX_SN.as_bytes());
+                data[..a.len()].copy_from_slice(a);
+                data[a.len() + 1..a.len() + 1 + b.len()].copy_from_slice(b);
+                40
+            }
+            reg::CHECK_VERIFY
+            | reg::GET_REPORT_TAU_OR_I
+            | reg::GET_ALLOW_APPROX_MOTION
+            | reg::GET_SAFE_LEVEL => 1,
+            reg::GET_HD_TYPES => 2,
+            reg::MOTION_EN => {
+                match params {
+                    [_axis, en, ..] if *en != 0 => {
+                        if !self.estop {
+                            self.enabled = true;
+                        }
+                    }
+                    [_axis, _, ..] => {
+                        self.enabled = false;
+                        self.state = arm_state::STOPPED;
+                        self.hold();
+                    }
+                    _ => invalid = true,
+                }
+                0
+            }
+            reg::SET_STATE => {
+                match params.first().copied() {
+                    Some(arm_state::START) => {
+                        if self.enabled && self.error == 0 {
+                            if !matches!(self.state, arm_state::MOVING | arm_state::SLEEPING) {
+                                self.hold();
+                            }
+                            self.state = arm_state::SLEEPING;
+                        }
+                    }
+                    Some(arm_state::PAUSED) => {
+                        if self.ready() {
+                            self.state = arm_state::PAUSED;
+                            self.hold();
+                        }
+                    }
+                    Some(arm_state::STOPPED) => {
+                        self.state = arm_state::STOPPED;
+                        self.hold();
+                    }
+                    _ => invalid = true,
+                }
+                0
+            }
+            reg::GET_STATE => {
+                data[0] = self.state;
+                1
+            }
+            reg::GET_CMDNUM => 2,
+            reg::GET_ERROR => {
+                data[0] = self.error;
+                data[1] = self.warn;
+                2
+            }
+            reg::CLEAN_ERR => {
+                if !self.estop {
+                    self.error = 0;
+                }
+                0
+            }
+            reg::CLEAN_WAR => {
+                self.warn = 0;
+                0
+            }
+            reg::SET_MODE => {
+                match params.first().copied() {
+                    Some(m @ (mode::POSITION | mode::SERVO)) => {
+                        if m != self.mode {
+                            self.mode = m;
+                            self.hold();
+                        }
+                    }
+                    _ => invalid = true,
+                }
+                0
+            }
+            reg::MOVE_SERVOJ => {
+                self.servo_j(params, &mut invalid);
+                0
+            }
+            reg::MOVE_JOINT => {
+                self.move_joint(params, &mut invalid);
+                0
+            }
+            reg::GET_TCP_POSE => put_f32s(&mut data, &tcp_pose(&self.reported_joints())),
+            reg::GET_JOINT_POS => {
+                let q = self.reported_joints();
+                match params.first().map(|n| n & 0x0F) {
+                    None | Some(0 | 1) => put_f32s(&mut data, &q),
+                    Some(n) => {
+                        let mut at = put_f32s(&mut data, &q);
+                        at += put_f32s(&mut data[at..], &self.plant.velocities());
+                        if n >= 3 {
+                            at += put_f32s(&mut data[at..], &[0.0; DOF]);
+                        }
+                        at
+                    }
+                }
+            }
+            reg::GET_JOINT_TAU => put_f32s(&mut data, &[0.0; DOF]),
+            _ => {
+                if self.unknown_registers.len() < 32 && !self.unknown_registers.contains(&register)
+                {
+                    self.unknown_registers.push(register);
+                }
+                invalid = true;
+                0
+            }
+        };
+        let mut state = self.state_byte();
+        if invalid {
+            state |= reg::STATE_INVALID;
+        }
+        BoxReply { state, len, data }
+    }
+
+    fn servo_j(&mut self, params: &[u8], invalid: &mut bool) {
+        let Some(q) = read_joints(params) else {
+            *invalid = true;
+            return;
+        };
+        if self.mode != mode::SERVO || !self.ready() {
+            return;
+        }
+        if q.iter().any(|v| !v.is_finite()) || self.beyond_limits(&q) {
+            self.raise_error(codes::ERR_JOINT_LIMIT);
+            return;
+        }
+        self.servo_commands += 1;
+        self.moving_to = None;
+        self.target = q;
+        self.plant.command(&q);
+    }
+
+    fn move_joint(&mut self, params: &[u8], invalid: &mut bool) {
+        let (Some(q), Some(speed)) = (read_joints(params), read_f32(params, 7)) else {
+            *invalid = true;
+            return;
+        };
+        if self.mode != mode::POSITION || !self.ready() {
+            return;
+        }
+        if q.iter().any(|v| !v.is_finite()) || self.beyond_limits(&q) {
+            self.raise_error(codes::ERR_JOINT_LIMIT);
+            return;
+        }
+        let speed =
+            if speed.is_finite() && speed > 0.0 { speed.min(std::f64::consts::PI) } else { 0.35 };
+        self.moving_to = Some((q, speed));
+    }
+
+    /// Advance the box and the plant by `dt` seconds.
+    pub fn step(&mut self, dt: f64) {
+        if let Some((goal, speed)) = self.moving_to {
+            let mut done = true;
+            let span =
+                goal.iter().zip(self.target.iter()).map(|(g, t)| (g - t).abs()).fold(0.0, f64::max);
+            let frac = if span > 0.0 { (speed * dt / span).min(1.0) } else { 1.0 };
+            for (t, g) in self.target.iter_mut().zip(goal.iter()) {
+                *t += (g - *t) * frac;
+                done &= (g - *t).abs() < 1e-9;
+            }
+            self.plant.command(&self.target);
+            if done {
+                self.moving_to = None;
+            }
+        }
+        self.plant.advance(dt);
+        match self.plant.collision() {
+            Some(c) => {
+                if !self.in_contact && self.enabled && self.error == 0 {
+                    self.raise_error(codes::ERR_COLLISION);
+                    self.last_collision = Some(c);
+                }
+                self.in_contact = true;
+            }
+            None => self.in_contact = false,
+        }
+        if matches!(self.state, arm_state::MOVING | arm_state::SLEEPING) {
+            let moving = self.plant.velocities().iter().any(|v| v.abs() > MOVING_SPEED)
+                || self.moving_to.is_some();
+            self.state = if moving { arm_state::MOVING } else { arm_state::SLEEPING };
+        }
+    }
+
+    /// What a report says now.
+    pub fn report(&mut self, timestamp_us: u64) -> ReportData {
+        self.report_counter = self.report_counter.wrapping_add(1);
+        let q = self.reported_joints();
+        let mask = if self.enabled { 0x7F } else { 0 };
+        ReportData {
+            state: self.state,
+            mode: self.mode,
+            cmd_num: 0,
+            q,
+            qd: self.plant.velocities(),
+            target_q: self.target,
+            tcp_pose: tcp_pose(&q),
+            error_code: self.error,
+            warn_code: self.warn,
+            brake_mask: mask,
+            enable_mask: mask,
+            timestamp_us,
+            counter: self.report_counter,
+        }
+    }
+
+    pub fn identity(&self) -> BoxIdentity<'static> {
+        BoxIdentity { robot_type: 7, axis: 7, version: "v2.5.0", joint_limits: self.limits }
+    }
+}
+
+/// The TCP (flange) pose as the box reports it: x, y, z in mm, roll, pitch, yaw in rad.
+pub fn tcp_pose(q: &Joints) -> [f64; 6] {
+    let pose = hitl_trajectories::kinematics::flange_pose(q);
+    let t: Vector3<f64> = pose.translation.vector * 1000.0;
+    let (roll, pitch, yaw) = pose.rotation.euler_angles();
+    [t.x, t.y, t.z, roll, pitch, yaw]
+}

@@ -1,0 +1,128 @@
+//! Interoperability: the official xArm Python SDK (xarm-python-sdk, from `make setup`) drives the
+//! stub with its defaults: connect, clear errors, enable, mode 1, state 0, a servo_j stream, then
+//! reads the pose back through get_servo_angle and its report stream; then a joint-limit
+//! violation and a collision must show the real error codes (23, 31) to the SDK.
+//!
+//! The stub runs on the box's own ports (502, 30000-30003) when they are free (we run as root);
+//! otherwise on free ports, with the SDK's port constants set to them by the peer script.
+
+mod protocol_common;
+
+use hitl_drivers::xarm::report::ReportKind;
+use hitl_hal::Joints;
+use hitl_sim_stub::{Stub, StubConfig, StubHandle};
+use protocol_common::LagPlant;
+use serde_json::{json, Value};
+use std::process::Command;
+
+const Q0: Joints = [0.0, -0.5, 0.0, 0.9, 0.0, 1.4, 0.0];
+const Q1: Joints = [0.3, -0.3, 0.2, 1.1, -0.2, 1.2, 0.4];
+/// The test plant's wall: joint 1 cannot pass 0.6 rad.
+const WALL: (usize, f64) = (0, 0.6);
+
+fn start_stub() -> (StubHandle, bool) {
+    let plant = || Box::new(LagPlant::new(Some(WALL)));
+    let config = StubConfig { initial_q: Q0, ..StubConfig::default() };
+    match Stub::start(config, plant()) {
+        Ok(stub) => (stub, true),
+        Err(e) => {
+            eprintln!("box ports busy or not bindable ({e}); using free ports");
+            let config = StubConfig { initial_q: Q0, ..StubConfig::ephemeral() };
+            (Stub::start(config, plant()).expect("stub on free ports"), false)
+        }
+    }
+}
+
+fn port(stub: &StubHandle, kind: ReportKind) -> u16 {
+    stub.report_addr(kind).expect("served").port()
+}
+
+fn joints(v: &Value) -> Vec<f64> {
+    v.as_array().expect("array").iter().map(|x| x.as_f64().expect("number")).collect()
+}
+
+fn assert_close(got: &[f64], want: &Joints, tol: f64, what: &str) {
+    assert_eq!(got.len(), 7, "{what}: {got:?}");
+    for j in 0..7 {
+        assert!(
+            (got[j] - want[j]).abs() < tol,
+            "{what}: joint {} {} vs {}",
+            j + 1,
+            got[j],
+            want[j]
+        );
+    }
+}
+
+#[test]
+fn official_python_sdk_streams_servo_j_and_sees_error_codes() {
+    let python = env!("HITL_VENV_PYTHON");
+    assert!(
+        std::path::Path::new(python).exists(),
+        "no Python venv at {python}: run make setup (it installs xarm-python-sdk)"
+    );
+    let (stub, on_box_ports) = start_stub();
+    if on_box_ports {
+        assert_eq!(stub.cmd_addr().port(), 502);
+    }
+    let mut limit_q = Q1;
+    limit_q[1] = 2.094395 + 0.001; // joint 2 just past its limit, inside the SDK's tolerance
+    let mut collide_q = Q1;
+    collide_q[0] = 1.0;
+    let args = json!({
+        "host": stub.cmd_addr().ip().to_string(),
+        "cmd_port": stub.cmd_addr().port(),
+        "real_port": port(&stub, ReportKind::Real),
+        "normal_port": port(&stub, ReportKind::Normal),
+        "rich_port": port(&stub, ReportKind::Rich),
+        "realtime_port": port(&stub, ReportKind::RealTime),
+        "q0": Q0, "q1": Q1, "limit_q": limit_q, "collide_q": collide_q,
+    });
+    let script = concat!(env!("CARGO_MANIFEST_DIR"), "/tests/peers/xarm_sdk_peer.py");
+    let out = Command::new(python).arg(script).arg(args.to_string()).output().expect("python runs");
+    let stdout = String::from_utf8_lossy(&out.stdout);
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert!(
+        out.status.success(),
+        "peer failed: {}\nstdout:\n{stdout}\nstderr:\n{stderr}",
+        out.status
+    );
+    let last = stdout.lines().rev().find(|l| l.starts_with('{')).expect("JSON line");
+    let v: Value = serde_json::from_str(last).expect("peer prints JSON");
+    let ctx = format!("peer said {v:#}\nstderr:\n{stderr}");
+
+    assert_eq!(v["connected"], true, "{ctx}");
+    assert_eq!(v["reported"], true, "{ctx}");
+    assert_eq!(v["version_number"], json!([2, 5, 0]), "{ctx}");
+    assert_eq!(v["sn"], "XS1303HITL01", "{ctx}");
+    assert_eq!(v["enable_codes"], json!([0, 0, 0, 0, 0]), "{ctx}");
+    assert_eq!(v["mode_after_enable"], 1, "{ctx}");
+    assert_eq!(v["state_after_enable"], 2, "{ctx}");
+    assert_eq!(v["servo_codes"], json!([0]), "every servo_j accepted: {ctx}");
+    assert_eq!(v["get_servo_angle"]["code"], 0, "{ctx}");
+    assert_close(&joints(&v["get_servo_angle"]["angles"]), &Q1, 1e-3, "get_servo_angle");
+    assert_close(&joints(&v["report_angles"]), &Q1, 1e-3, "report stream (30002 via the SDK)");
+    assert_close(
+        &joints(&v["raw_real"]["angles"]),
+        &Q1,
+        1e-3,
+        "30003 read with the SDK's structure",
+    );
+    assert_eq!(v["raw_real"]["size"], 135, "{ctx}");
+    assert_eq!(v["raw_normal"]["size"], 145, "{ctx}");
+
+    // Joint limit: the box answers the servo_j with its error bit (SDK code 1) and error 23.
+    assert_eq!(v["limit"]["servo_code"], 1, "{ctx}");
+    assert_eq!(v["limit"]["err_warn"], json!([0, [23, 0]]), "{ctx}");
+    assert_eq!(v["limit"]["state"], 4, "{ctx}");
+    assert_eq!(v["limit"]["report_error"], 23, "{ctx}");
+
+    // Collision with the scene: error 31 (collision caused abnormal current).
+    assert_eq!(v["recover_codes"], json!([0, 0, 0, 0, 0]), "{ctx}");
+    assert_eq!(v["collision"]["err_warn"], json!([0, [31, 0]]), "{ctx}");
+    assert_eq!(v["collision"]["state"], 4, "{ctx}");
+    assert_eq!(v["collision"]["report_error"], 31, "{ctx}");
+
+    assert_eq!(stub.with_box(|b| b.unknown_registers.clone()), Vec::<u8>::new(), "{ctx}");
+    stub.shutdown();
+}
