@@ -1,0 +1,253 @@
+//! The ray-casting renderer: one ray per pixel through MuJoCo (`mj_multiRay` from the camera's
+//! optical centre), so it runs headless on a CPU-only machine.
+//!
+//! Per pixel (u, v) (OpenCV convention: integer coordinates are pixel centres) the ray is
+//! `((u - cx) / fx, (v - cy) / fy, 1)` in OpenCV camera axes. Depth is the z-depth along the
+//! optical axis (not the ray length), 0 where the ray hits nothing; the mask is 255 where the hit
+//! geom belongs to the target body's tree; the colour is Lambert shading of the geom's albedo by
+//! the Sun (`albedo * (ambient + level * max(0, n . l))`, normals from MuJoCo's ray-surface
+//! intersection), with target pixels in shadow when a ray towards the Sun hits the target or the
+//! arm first. No hit is black, as the paper's black background.
+
+use crate::mujoco_plant::LabModel;
+use hitl_hal::{Intrinsics, Joints, DOF};
+use mujoco_rs::prelude::{MjData, MjModel};
+use nalgebra::{Isometry3, Matrix3, Point3, Rotation3, Translation3, UnitQuaternion, Vector3};
+use std::sync::Arc;
+
+/// How the colour image is lit.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Shading {
+    /// Ambient light as a fraction of full Sun on a surface facing it (dim: the enclosure is dark).
+    pub ambient: f32,
+    /// Cast shadow rays for target pixels (the target's self-shadowing and the arm's shadow).
+    pub shadows: bool,
+    /// Direction the Sun's light travels, lab frame; `None` uses the scene's `sun` light (from
+    /// the lab's lamp towards the target), or straight down when the scene has none.
+    pub sun_direction_lab: Option<Vector3<f64>>,
+}
+
+impl Default for Shading {
+    fn default() -> Self {
+        Self { ambient: 0.04, shadows: true, sun_direction_lab: None }
+    }
+}
+
+/// One rendered frame.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Image {
+    pub intrinsics: Intrinsics,
+    /// rgb8, row-major.
+    pub color: Vec<u8>,
+    /// z-depth, metres, 0 where nothing was hit.
+    pub depth_m: Vec<f32>,
+    /// mono8: 255 target, 0 else.
+    pub mask: Vec<u8>,
+}
+
+/// Shadow rays see only the arm's (group 1) and the target's (group 2) geoms.
+const SHADOW_GROUPS: [u8; 6] = [0, 1, 1, 0, 0, 0];
+
+/// A renderer with its own `MjData` on the lab model.
+pub struct Renderer {
+    lab: LabModel,
+    data: MjData<Arc<MjModel>>,
+    /// The camera's own body: its geoms never block the view.
+    camera_body: Option<usize>,
+    arm_root: Option<usize>,
+    albedo: Vec<[f32; 3]>,
+    is_target: Vec<bool>,
+    dirs: Vec<[f64; 3]>,
+    normals: Vec<[f64; 3]>,
+    pub shading: Shading,
+}
+
+impl Renderer {
+    /// A renderer for `lab`; it needs the `camera_cv` site or the `flange_camera` camera.
+    pub fn new(lab: LabModel) -> Result<Self, String> {
+        let m = lab.model.clone();
+        let camera_body = match (lab.camera_site, lab.camera) {
+            (Some(s), _) => Some(m.site_bodyid()[s] as usize),
+            (None, Some(c)) => Some(m.cam_bodyid()[c] as usize),
+            (None, None) => {
+                return Err(format!(
+                    "the scene has neither a site '{}' nor a camera '{}' on the flange",
+                    crate::mjcf::CAMERA_SITE,
+                    crate::mjcf::CAMERA_NAME
+                ))
+            }
+        };
+        let target_root = lab.target_body.map(|b| m.body_rootid()[b]);
+        let parents = m.body_parentid();
+        let arm_root = (0..lab.arm_body.len()).find(|&b| lab.arm_body[b] && parents[b] == 0);
+        let ngeom = m.geom_bodyid().len();
+        let mut albedo = Vec::with_capacity(ngeom);
+        let mut is_target = Vec::with_capacity(ngeom);
+        for g in 0..ngeom {
+            let mat = m.geom_matid()[g];
+            let rgba = if mat >= 0 { m.mat_rgba()[mat as usize] } else { m.geom_rgba()[g] };
+            albedo.push([rgba[0], rgba[1], rgba[2]]);
+            let body = m.geom_bodyid()[g] as usize;
+            is_target.push(target_root.is_some_and(|r| m.body_rootid()[body] == r));
+        }
+        let data = MjData::new(m);
+        Ok(Self {
+            lab,
+            data,
+            camera_body,
+            arm_root,
+            albedo,
+            is_target,
+            dirs: Vec::new(),
+            normals: Vec::new(),
+            shading: Shading::default(),
+        })
+    }
+
+    /// Put the arm at `q` and compute the kinematics.
+    pub fn set_joints(&mut self, q: &Joints) {
+        {
+            let qpos = self.data.qpos_mut();
+            for j in 0..DOF {
+                qpos[self.lab.qpos_adr[j]] = q[j];
+            }
+        }
+        self.data.forward_kinematics();
+    }
+
+    /// Camera pose (OpenCV axes) in the lab frame for the current joints.
+    pub fn camera_in_lab(&self) -> Isometry3<f64> {
+        if let Some(s) = self.lab.camera_site {
+            pose(&self.data.site_xpos()[s], &self.data.site_xmat()[s])
+        } else if let Some(c) = self.lab.camera {
+            let mj = pose(&self.data.cam_xpos()[c], &self.data.cam_xmat()[c]);
+            mj * UnitQuaternion::from_axis_angle(&Vector3::x_axis(), std::f64::consts::PI)
+        } else {
+            Isometry3::identity()
+        }
+    }
+
+    /// The arm base's pose in the lab frame.
+    pub fn base_in_lab(&self) -> Isometry3<f64> {
+        match self.arm_root {
+            Some(b) => {
+                let p = self.data.xpos()[b];
+                let q = self.data.xquat()[b];
+                Isometry3::from_parts(
+                    Translation3::new(p[0], p[1], p[2]),
+                    UnitQuaternion::from_quaternion(nalgebra::Quaternion::new(
+                        q[0], q[1], q[2], q[3],
+                    )),
+                )
+            }
+            None => Isometry3::identity(),
+        }
+    }
+
+    /// Direction the Sun's light travels in the lab frame (unit).
+    pub fn sun_direction(&self) -> Vector3<f64> {
+        let d = match (self.shading.sun_direction_lab, self.lab.sun) {
+            (Some(d), _) => d,
+            (None, Some(l)) => Vector3::from(self.data.light_xdir()[l]),
+            (None, None) => -Vector3::z(),
+        };
+        if d.norm() > 1e-12 && d.iter().all(|v| v.is_finite()) {
+            d.normalize()
+        } else {
+            -Vector3::z()
+        }
+    }
+
+    /// Render from `camera` (OpenCV axes, lab frame) with the current joints, principal point
+    /// moved by `shift_px`, Sun at `level` (0..1).
+    pub fn render_from(
+        &mut self,
+        camera: &Isometry3<f64>,
+        intr: &Intrinsics,
+        level: f32,
+        shift_px: [f64; 2],
+    ) -> Image {
+        let (w, h) = (intr.width as usize, intr.height as usize);
+        let n = w * h;
+        let rot = camera.rotation.to_rotation_matrix();
+        let (cx, cy) = (intr.cx + shift_px[0], intr.cy + shift_px[1]);
+        self.dirs.clear();
+        self.dirs.reserve(n);
+        for v in 0..h {
+            let y = (v as f64 - cy) / intr.fy;
+            for u in 0..w {
+                let x = (u as f64 - cx) / intr.fx;
+                let d = rot * Vector3::new(x, y, 1.0).normalize();
+                self.dirs.push([d.x, d.y, d.z]);
+            }
+        }
+        self.normals.clear();
+        self.normals.resize(n, [0.0; 3]);
+        let origin = camera.translation.vector;
+        let origin_arr = [origin.x, origin.y, origin.z];
+        let (geoms, dist) = self.data.multi_ray(
+            &origin_arr,
+            &self.dirs,
+            None,
+            true,
+            self.camera_body,
+            1.0e6,
+            Some(&mut self.normals),
+        );
+        let optical = rot * Vector3::z();
+        let to_sun = -self.sun_direction();
+        let level = level.clamp(0.0, 1.0);
+        let ambient = self.shading.ambient.max(0.0);
+        let mut color = vec![0u8; 3 * n];
+        let mut depth_m = vec![0.0f32; n];
+        let mut mask = vec![0u8; n];
+        for i in 0..n {
+            let Some(g) = geoms[i] else { continue };
+            let t = dist[i];
+            if !(t >= 0.0 && t.is_finite()) {
+                continue;
+            }
+            let d = Vector3::from(self.dirs[i]);
+            depth_m[i] = (t * d.dot(&optical)) as f32;
+            let target = self.is_target[g];
+            if target {
+                mask[i] = 255;
+            }
+            let mut nrm = Vector3::from(self.normals[i]);
+            if nrm.dot(&d) > 0.0 {
+                nrm = -nrm;
+            }
+            let mut lambert = nrm.dot(&to_sun).max(0.0);
+            if lambert > 0.0 && target && self.shading.shadows {
+                let hit = Point3::from(origin + d * t + nrm * 1e-5);
+                let (blocker, _) = self.data.ray(
+                    &[hit.x, hit.y, hit.z],
+                    &[to_sun.x, to_sun.y, to_sun.z],
+                    Some(&SHADOW_GROUPS),
+                    true,
+                    None,
+                    None,
+                );
+                if blocker.is_some() {
+                    lambert = 0.0;
+                }
+            }
+            let shade = ambient + level * lambert as f32;
+            for c in 0..3 {
+                color[3 * i + c] =
+                    (self.albedo[g][c] * shade * 255.0).round().clamp(0.0, 255.0) as u8;
+            }
+        }
+        Image { intrinsics: *intr, color, depth_m, mask }
+    }
+}
+
+fn pose(p: &[f64; 3], m: &[f64; 9]) -> Isometry3<f64> {
+    let r = Rotation3::from_matrix_unchecked(Matrix3::new(
+        m[0], m[1], m[2], m[3], m[4], m[5], m[6], m[7], m[8],
+    ));
+    Isometry3::from_parts(
+        Translation3::new(p[0], p[1], p[2]),
+        UnitQuaternion::from_rotation_matrix(&r),
+    )
+}
