@@ -26,13 +26,10 @@ fn client(stub: &StubHandle) -> XarmClient {
 }
 
 fn reader(stub: &StubHandle) -> ReportReader {
-    let addr = stub.report_addr(ReportKind::Real).expect("30003 served");
-    let config = ReportConfig {
-        port: Some(addr.port()),
-        codes_port: stub.report_addr(ReportKind::Normal).map(|a| a.port()),
-        ..ReportConfig::default()
-    };
-    ReportReader::connect(addr.ip(), config).expect("report port connects")
+    let (host, config) = stub.report_config(ReportConfig::default());
+    assert_eq!(config.port, stub.report_addr(ReportKind::Real).map(|a| a.port()));
+    assert_eq!(config.codes_port, stub.report_addr(ReportKind::Normal).map(|a| a.port()));
+    ReportReader::connect(host, config).expect("report port connects")
 }
 
 /// Stream a straight line from `from` to `to` in `steps` servo_j setpoints at 250 Hz.

@@ -238,6 +238,22 @@ impl StubHandle {
         self.report_addrs.iter().find(|(k, _)| *k == kind).map(|(_, a)| *a)
     }
 
+    /// Where a [`ReportReader`](hitl_drivers::xarm::ReportReader) finds this stub's reports:
+    /// `base` with its report port (30003's stand-in) and codes port (30001's) set to this
+    /// stub's, and the host to connect to.
+    pub fn report_config(
+        &self,
+        base: hitl_drivers::xarm::ReportConfig,
+    ) -> (IpAddr, hitl_drivers::xarm::ReportConfig) {
+        let port = |k| self.report_addr(k).map(|a| a.port());
+        let config = hitl_drivers::xarm::ReportConfig {
+            port: port(base.kind).or(base.port),
+            codes_port: base.codes_port.and(port(ReportKind::Normal)),
+            ..base
+        };
+        (self.cmd_addr.ip(), config)
+    }
+
     /// The plant's true joints (no injected deviation).
     pub fn plant_joints(&self) -> Joints {
         self.shared.lock_arm().plant_joints()
