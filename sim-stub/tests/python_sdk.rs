@@ -3,6 +3,7 @@
 //! reads the pose back through get_servo_angle and its report stream; then a joint-limit
 //! violation and a collision must show the real error codes (23, 31) to the SDK.
 //!
+//! Run twice: with the MuJoCo lab plant (what `hitl stub` serves) and with a first-order plant.
 //! The stub runs on the box's own ports (502, 30000-30003) when they are free (we run as root);
 //! otherwise on free ports, with the SDK's port constants set to them by the peer script.
 
@@ -10,24 +11,31 @@ mod protocol_common;
 
 use hitl_drivers::xarm::report::ReportKind;
 use hitl_hal::Joints;
+use hitl_sim_stub::mujoco_plant::MujocoPlant;
+use hitl_sim_stub::plant::Plant;
 use hitl_sim_stub::{Stub, StubConfig, StubHandle};
+use hitl_trajectories::lab::LabConfig;
 use protocol_common::LagPlant;
 use serde_json::{json, Value};
+use std::f64::consts::{FRAC_PI_2, PI};
 use std::process::Command;
+use std::sync::Mutex;
 
 const Q0: Joints = [0.0, -0.5, 0.0, 0.9, 0.0, 1.4, 0.0];
 const Q1: Joints = [0.3, -0.3, 0.2, 1.1, -0.2, 1.2, 0.4];
 /// The test plant's wall: joint 1 cannot pass 0.6 rad.
 const WALL: (usize, f64) = (0, 0.6);
 
-fn start_stub() -> (StubHandle, bool) {
-    let plant = || Box::new(LagPlant::new(Some(WALL)));
-    let config = StubConfig { initial_q: Q0, ..StubConfig::default() };
+/// Both tests want the box's own ports: run them one at a time.
+static BOX_PORTS: Mutex<()> = Mutex::new(());
+
+fn start_stub(initial_q: Joints, plant: impl Fn() -> Box<dyn Plant>) -> (StubHandle, bool) {
+    let config = StubConfig { initial_q, ..StubConfig::default() };
     match Stub::start(config, plant()) {
         Ok(stub) => (stub, true),
         Err(e) => {
             eprintln!("box ports busy or not bindable ({e}); using free ports");
-            let config = StubConfig { initial_q: Q0, ..StubConfig::ephemeral() };
+            let config = StubConfig { initial_q, ..StubConfig::ephemeral() };
             (Stub::start(config, plant()).expect("stub on free ports"), false)
         }
     }
@@ -54,21 +62,26 @@ fn assert_close(got: &[f64], want: &Joints, tol: f64, what: &str) {
     }
 }
 
-#[test]
-fn official_python_sdk_streams_servo_j_and_sees_error_codes() {
+/// Start a stub around `plant`, run the SDK peer, check everything it saw.
+fn sdk_session(
+    plant: impl Fn() -> Box<dyn Plant>,
+    q0: Joints,
+    q1: Joints,
+    collide_q: Joints,
+    tol: f64,
+) {
     let python = env!("HITL_VENV_PYTHON");
     assert!(
         std::path::Path::new(python).exists(),
         "no Python venv at {python}: run make setup (it installs xarm-python-sdk)"
     );
-    let (stub, on_box_ports) = start_stub();
+    let _ports = BOX_PORTS.lock().unwrap_or_else(|e| e.into_inner());
+    let (stub, on_box_ports) = start_stub(q0, plant);
     if on_box_ports {
         assert_eq!(stub.cmd_addr().port(), 502);
     }
-    let mut limit_q = Q1;
+    let mut limit_q = q1;
     limit_q[1] = 2.094395 + 0.001; // joint 2 just past its limit, inside the SDK's tolerance
-    let mut collide_q = Q1;
-    collide_q[0] = 1.0;
     let args = json!({
         "host": stub.cmd_addr().ip().to_string(),
         "cmd_port": stub.cmd_addr().port(),
@@ -76,7 +89,7 @@ fn official_python_sdk_streams_servo_j_and_sees_error_codes() {
         "normal_port": port(&stub, ReportKind::Normal),
         "rich_port": port(&stub, ReportKind::Rich),
         "realtime_port": port(&stub, ReportKind::RealTime),
-        "q0": Q0, "q1": Q1, "limit_q": limit_q, "collide_q": collide_q,
+        "q0": q0, "q1": q1, "limit_q": limit_q, "collide_q": collide_q,
     });
     let script = concat!(env!("CARGO_MANIFEST_DIR"), "/tests/peers/xarm_sdk_peer.py");
     let out = Command::new(python).arg(script).arg(args.to_string()).output().expect("python runs");
@@ -100,12 +113,12 @@ fn official_python_sdk_streams_servo_j_and_sees_error_codes() {
     assert_eq!(v["state_after_enable"], 2, "{ctx}");
     assert_eq!(v["servo_codes"], json!([0]), "every servo_j accepted: {ctx}");
     assert_eq!(v["get_servo_angle"]["code"], 0, "{ctx}");
-    assert_close(&joints(&v["get_servo_angle"]["angles"]), &Q1, 1e-3, "get_servo_angle");
-    assert_close(&joints(&v["report_angles"]), &Q1, 1e-3, "report stream (30002 via the SDK)");
+    assert_close(&joints(&v["get_servo_angle"]["angles"]), &q1, tol, "get_servo_angle");
+    assert_close(&joints(&v["report_angles"]), &q1, tol, "report stream (30002 via the SDK)");
     assert_close(
         &joints(&v["raw_real"]["angles"]),
-        &Q1,
-        1e-3,
+        &q1,
+        tol,
         "30003 read with the SDK's structure",
     );
     assert_eq!(v["raw_real"]["size"], 135, "{ctx}");
@@ -125,4 +138,27 @@ fn official_python_sdk_streams_servo_j_and_sees_error_codes() {
 
     assert_eq!(stub.with_box(|b| b.unknown_registers.clone()), Vec::<u8>::new(), "{ctx}");
     stub.shutdown();
+}
+
+#[test]
+fn official_python_sdk_against_the_mujoco_stub() {
+    // The generated lab; the arm stretched out horizontally towards the far end, as in the
+    // plant's own wall test. A small servo move, then a turn of joint 1 into the side wall.
+    let start = [PI, 1.4167, 0.0, 2.81, 0.0, 0.5467, 0.0];
+    let mut q1 = start;
+    q1[0] += 0.2;
+    q1[5] += 0.1;
+    let mut collide = start;
+    collide[0] = PI + FRAC_PI_2;
+    let plant = || -> Box<dyn Plant> {
+        Box::new(MujocoPlant::new(&LabConfig::default(), None).expect("MuJoCo lab plant"))
+    };
+    sdk_session(plant, start, q1, collide, 2e-3);
+}
+
+#[test]
+fn official_python_sdk_against_a_first_order_plant() {
+    let mut collide_q = Q1;
+    collide_q[0] = 1.0;
+    sdk_session(|| Box::new(LagPlant::new(Some(WALL))), Q0, Q1, collide_q, 1e-3);
 }
