@@ -63,6 +63,10 @@ pub fn visit(
                 let buf = r.insert(n);
                 let got =
                     file.read(buf).map_err(|e| ReadError::Io { path: p.clone(), source: e })?;
+                if got == 0 {
+                    // End of the file before the footer: a file cut short by a crash.
+                    break;
+                }
                 r.notify_read(got);
             }
             LinearReadEvent::Record { data, opcode } => {

@@ -171,6 +171,21 @@ impl Drop for RecorderHandle {
     }
 }
 
+/// An error with its causes ("MCAP writer: I/O error: File too large (os error 27)").
+fn error_chain(e: &dyn std::error::Error) -> String {
+    let mut s = e.to_string();
+    let mut cur = e.source();
+    while let Some(c) = cur {
+        let c_s = c.to_string();
+        if !s.contains(&c_s) {
+            s.push_str(": ");
+            s.push_str(&c_s);
+        }
+        cur = c.source();
+    }
+    s
+}
+
 struct Worker {
     sink: Option<McapSink>,
     tel: Telemetry,
@@ -257,7 +272,7 @@ impl Worker {
                 None
             }
             Err(e) => {
-                let reason = format!("{}: {e}", self.path.display());
+                let reason = format!("{}: {}", self.path.display(), error_chain(&e));
                 self.health.set_failed(reason.clone());
                 self.failure = Some(reason);
                 self.tel.q.closed.store(true, Ordering::Release);
@@ -332,7 +347,7 @@ impl Worker {
             match sink.finish() {
                 Ok(()) => self.health.set_closed(),
                 Err(e) => {
-                    let reason = format!("{}: closing: {e}", self.path.display());
+                    let reason = format!("{}: closing: {}", self.path.display(), error_chain(&e));
                     self.health.set_failed(reason.clone());
                     self.failure = Some(reason);
                 }

@@ -36,10 +36,10 @@ fn write_run(path: &std::path::Path, cfg: RecorderConfig) -> RecordSummary {
             tick_ns: 15_000,
             overrun: k == 50,
         });
-        if k % 40 == 0 {
+        if k.is_multiple_of(40) {
             tel.push_light(&LightMsg { t_ns: t, level: 0.5 });
         }
-        if k % 30 == 0 && k / 30 < FRAMES {
+        if k.is_multiple_of(30) && k / 30 < FRAMES {
             let fk = k / 30;
             assert!(tel.push_frame(frame(fk, t, true)));
             let mut est = frame(fk, t, true).gt_pose.unwrap_or(Pose::IDENTITY);
@@ -58,7 +58,7 @@ fn write_run(path: &std::path::Path, cfg: RecorderConfig) -> RecordSummary {
             tel.push_event(SafetyEventMsg::text(t, EventKind::StopStarted, "deviation trip"));
         }
         // Give the recorder a chance to drain (the queues hold all of it anyway).
-        if k % 50 == 0 {
+        if k.is_multiple_of(50) {
             std::thread::sleep(std::time::Duration::from_millis(5));
         }
     }

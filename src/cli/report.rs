@@ -1,11 +1,54 @@
-//! `hitl report` (being built: see the issues).
+//! `hitl report RUN.mcap [--out DIR]`: summary JSON, plots and an index.html for one run.
 
 use crate::exit;
+use hitl_record::report::{default_out_dir, write_report, ReportError};
+use std::path::PathBuf;
 
+/// Write a report of a recording: summary.json, SVG plots and index.html.
 #[derive(Debug, clap::Args)]
-pub struct ReportArgs {}
+pub struct ReportArgs {
+    /// The recording (MCAP) to report on; a file cut short by a crash is read up to its last
+    /// complete chunk.
+    pub recording: PathBuf,
+    /// Output folder (default: RUN_report/ next to RUN.mcap).
+    #[arg(long)]
+    pub out: Option<PathBuf>,
+    /// Print the summary as one JSON object.
+    #[arg(long)]
+    pub json: bool,
+}
 
-pub fn run(_args: ReportArgs) -> u8 {
-    eprintln!("hitl report: not built yet");
-    exit::BAD_INPUT
+pub fn run(args: ReportArgs) -> u8 {
+    let dir = args.out.clone().unwrap_or_else(|| default_out_dir(&args.recording));
+    match write_report(&args.recording, Some(&dir)) {
+        Ok(r) => {
+            if args.json {
+                match serde_json::to_string(&r.summary) {
+                    Ok(s) => println!("{s}"),
+                    Err(e) => {
+                        eprintln!("hitl report: {e}");
+                        return exit::BAD_INPUT;
+                    }
+                }
+            } else {
+                if !r.summary.complete {
+                    eprintln!(
+                        "hitl report: {} was cut short ({}); reporting what it holds",
+                        args.recording.display(),
+                        r.summary.truncated.as_deref().unwrap_or("no footer")
+                    );
+                }
+                println!("{}", r.dir.join("index.html").display());
+            }
+            exit::OK
+        }
+        Err(e @ ReportError::Read(_)) => {
+            eprintln!("hitl report: {e}");
+            exit::BAD_INPUT
+        }
+        Err(e) => {
+            eprintln!("hitl report: {e}");
+            exit::BAD_INPUT
+        }
+    }
 }

@@ -1,0 +1,109 @@
+//! `hitl report` on a synthetic recording: the files exist and the summary's values are right.
+
+mod common;
+
+use common::*;
+use hitl_record::report::write_report;
+use hitl_record::*;
+
+#[test]
+fn report_of_a_synthetic_run() {
+    let dir = tempfile::tempdir().expect("tempdir");
+    let path = dir.path().join("run.mcap");
+    let (handle, tel) = Recorder::spawn(&path, &meta()).expect("spawn");
+    let t0 = 1_000_000_000u64;
+    // 2 s at 250 Hz; the arm lags by 0.01 rad on joint 3; every 10th tick wakes 100 us late.
+    for k in 0..500u64 {
+        let t = t0 + k * 4_000_000;
+        let mut q = [0.1; 7];
+        q[2] = 0.5;
+        tel.push_setpoint(&SetpointMsg {
+            tick: k,
+            t_ns: t,
+            phase: Phase::Playback,
+            q,
+            qd: [0.0; 7],
+        });
+        let mut m = q;
+        m[2] -= 0.01;
+        tel.push_state(&ArmStateMsg {
+            t_ns: t + 500_000,
+            q: m,
+            state: 1,
+            mode: 1,
+            error_code: 0,
+            warn_code: 0,
+        });
+        tel.push_timing(&TimingMsg {
+            tick: k,
+            t_ns: t,
+            wake_late_ns: if k.is_multiple_of(10) { 100_000 } else { 10_000 },
+            tick_ns: 20_000,
+            overrun: false,
+        });
+        if k.is_multiple_of(25) {
+            let fk = k / 25;
+            tel.push_frame(frame(fk, t, true));
+            let mut est = frame(fk, t, true).gt_pose.unwrap_or(Pose::IDENTITY);
+            est.translation[0] += 0.003; // 3 mm off
+            tel.push_pose_estimate(&PoseStamped { capture_ns: t, pose: est });
+            tel.push_light(&LightMsg { t_ns: t, level: 0.8 });
+        }
+        if k == 400 {
+            tel.push_event(SafetyEventMsg::text(t, EventKind::OperatorStop, "Ctrl-C"));
+        }
+        if k.is_multiple_of(100) {
+            std::thread::sleep(std::time::Duration::from_millis(3));
+        }
+    }
+    handle.finish().expect("finish");
+
+    let out = dir.path().join("report");
+    let r = write_report(&path, Some(&out)).expect("report");
+    for f in [
+        "summary.json",
+        "index.html",
+        "joints.svg",
+        "tracking_error.svg",
+        "lateness.svg",
+        "camera_path.svg",
+        "sun_phase.svg",
+        "pose_error.svg",
+    ] {
+        let p = out.join(f);
+        let len = std::fs::metadata(&p).map(|m| m.len()).unwrap_or(0);
+        assert!(len > 200, "{f}: {len} bytes");
+    }
+    let s = &r.summary;
+    assert!(s.complete);
+    assert!((s.duration_s - (499.0 * 0.004 + 0.0005)).abs() < 1e-9, "{}", s.duration_s);
+    let tr = s.tracking.as_ref().expect("tracking");
+    assert_eq!(tr.samples, 500);
+    assert!((tr.rms_rad[2] - 0.01).abs() < 1e-9);
+    assert!(tr.rms_rad[0].abs() < 1e-12);
+    assert!((tr.max_abs_deg - 0.01f64.to_degrees()).abs() < 1e-9);
+    let late = s.timing.wake_late_us.as_ref().expect("lateness");
+    assert_eq!(late.count, 500);
+    assert!((late.p50 - 10.0).abs() < 1e-9);
+    assert!((late.max - 100.0).abs() < 1e-9);
+    assert!((late.mean - 19.0).abs() < 1e-9);
+    let pe = s.pose_error.as_ref().expect("pose error");
+    assert_eq!(pe.pairs, 20);
+    let tmm = pe.translation_mm.as_ref().expect("translation");
+    assert!((tmm.mean - 3.0).abs() < 1e-6 && (tmm.max - 3.0).abs() < 1e-6);
+    assert_eq!(s.events.len(), 1);
+    assert_eq!(s.events[0].kind, "operator-stop");
+    assert!((s.events[0].t_s - 1.6).abs() < 1e-9);
+    assert_eq!(s.topic_counts["/camera/depth"], 20);
+    assert_eq!(s.dropped.values().sum::<u64>(), 0);
+    assert_eq!(s.trajectory_sha256.as_deref(), Some("ab".repeat(32).as_str()));
+
+    let json: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(out.join("summary.json")).expect("read"))
+            .expect("json");
+    assert_eq!(json["tracking"]["samples"], 500);
+    let html = std::fs::read_to_string(out.join("index.html")).expect("html");
+    assert!(html.contains("camera_path.svg") && html.contains("operator-stop"));
+    let svg = std::fs::read_to_string(out.join("camera_path.svg")).expect("svg");
+    assert!(svg.contains("x-z"));
+}
