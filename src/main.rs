@@ -3,10 +3,8 @@
 //! This file only parses the command line and hands each subcommand to its module in [`cli`];
 //! every subcommand returns one of the contract's exit codes ([`exit`]).
 
-mod cli;
-mod exit;
-
 use clap::{Parser, Subcommand};
+use hitl::{cli, exit};
 use std::process::ExitCode;
 
 /// Hardware-in-the-loop controller for the DreamSat-Bench xArm7 testbed.

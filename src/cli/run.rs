@@ -1,11 +1,156 @@
-//! `hitl run` / `hitl record` (being built: see the issues).
+//! `hitl run` / `hitl record`: play a trajectory with every interlock armed.
+//!
+//! Without `--arm` the embedded MuJoCo stub on loopback is the target. With `--arm HOST` a real
+//! xArm moves: the operator must confirm the enclosure is clear (or pass `--yes`), and the run
+//! refuses when it cannot ask.
 
+use crate::control::session::{self, ArmTarget, RunRequest};
 use crate::exit;
+use crate::rt::RtOptions;
+use hitl_trajectories::lab::LabConfig;
+use std::io::{BufRead, IsTerminal, Write};
+use std::path::PathBuf;
+use std::time::Duration;
 
 #[derive(Debug, clap::Args)]
-pub struct RunArgs {}
+pub struct RunArgs {
+    /// The trajectory to play (NPZ, see docs/npz-schema.md).
+    pub trajectory: PathBuf,
+    /// Drive the real xArm at this address (host or IP). Without it the embedded stub is used.
+    #[arg(long, value_name = "HOST")]
+    pub arm: Option<String>,
+    /// Control rate in Hz (50-1000).
+    #[arg(long, default_value_t = 250.0, value_name = "HZ")]
+    pub rate: f64,
+    /// Slow the trajectory down: time is stretched by 1/S, S in (0, 1].
+    #[arg(long, default_value_t = 1.0, value_name = "S")]
+    pub speed_scale: f64,
+    /// Record the run to this MCAP file (`hitl record` picks runs/run-<time>.mcap by default).
+    #[arg(long, value_name = "FILE.mcap")]
+    pub record: Option<PathBuf>,
+    /// Lab configuration (TOML). Defaults to the DreamSat-Bench enclosure.
+    #[arg(long, value_name = "FILE.toml")]
+    pub config: Option<PathBuf>,
+    /// Camera: sim (the stub's rendered camera), orbbec, or none.
+    #[arg(long, default_value = "sim", value_name = "sim|orbbec|none")]
+    pub camera: String,
+    /// Light: sim, dmx:DEV (Enttec DMX USB Pro), trigger:DEV (trigger box), or none.
+    #[arg(long, default_value = "sim", value_name = "sim|dmx:DEV|trigger:DEV|none")]
+    pub light: String,
+    /// Pose estimation on captured frames: icp, onnx:MODEL, or none.
+    #[arg(long, default_value = "none", value_name = "icp|onnx:MODEL|none")]
+    pub perception: String,
+    /// Inject a stub fault at a time into the run (repeatable): drop-connection, stall-reports,
+    /// arm-error, deviation, estop, door-open; e.g. `--stub-fault estop@2.5`.
+    #[arg(long = "stub-fault", value_name = "KIND@SECONDS")]
+    pub stub_faults: Vec<String>,
+    /// Do not ask for confirmation before moving a real arm (the enclosure is known to be clear).
+    #[arg(long)]
+    pub yes: bool,
+    /// SCHED_FIFO priority of the loop thread (0: normal scheduler).
+    #[arg(long, default_value_t = 80, value_name = "PRIO")]
+    pub rt_priority: i32,
+    /// Pin the loop thread to this CPU.
+    #[arg(long, value_name = "CPU")]
+    pub cpu: Option<usize>,
+    /// Spin for the last N microseconds before each deadline (tighter wake-ups, one busy core).
+    #[arg(long, default_value_t = 0, value_name = "US")]
+    pub spin_us: u64,
+    /// Print plain progress lines even on a terminal.
+    #[arg(long)]
+    pub plain: bool,
+}
 
-pub fn run(_args: RunArgs, _record: bool) -> u8 {
-    eprintln!("hitl run: not built yet");
-    exit::BAD_INPUT
+/// Ask the operator to confirm the enclosure is clear; `None` when there is no one to ask.
+fn confirm_enclosure_clear(host: &str) -> Option<bool> {
+    if !std::io::stdin().is_terminal() {
+        return None;
+    }
+    eprint!(
+        "About to move the REAL arm at {host}. Is the enclosure clear and the door closed? [y/N] "
+    );
+    let _ = std::io::stderr().flush();
+    let mut line = String::new();
+    std::io::stdin().lock().read_line(&mut line).ok()?;
+    Some(matches!(line.trim(), "y" | "Y" | "yes" | "YES"))
+}
+
+fn default_record_path() -> PathBuf {
+    let secs = std::time::SystemTime::now()
+        .duration_since(std::time::UNIX_EPOCH)
+        .map(|d| d.as_secs())
+        .unwrap_or(0);
+    PathBuf::from("runs").join(format!("run-{secs}.mcap"))
+}
+
+pub fn run(args: RunArgs, record: bool) -> u8 {
+    let lab = match &args.config {
+        Some(path) => match LabConfig::load(path) {
+            Ok(lab) => lab,
+            Err(e) => {
+                eprintln!("hitl run: {e}");
+                return exit::BAD_INPUT;
+            }
+        },
+        None => LabConfig::default(),
+    };
+    let target = match &args.arm {
+        None => ArmTarget::Stub { faults: args.stub_faults.clone() },
+        Some(host) => {
+            if !args.stub_faults.is_empty() {
+                eprintln!("hitl run: --stub-fault only applies to the embedded stub, not to --arm");
+                return exit::BAD_INPUT;
+            }
+            if !args.yes {
+                match confirm_enclosure_clear(host) {
+                    Some(true) => {}
+                    Some(false) => {
+                        eprintln!("hitl run: not confirmed; nothing moved");
+                        return exit::BAD_INPUT;
+                    }
+                    None => {
+                        eprintln!(
+                            "hitl run: refusing to move the real arm at {host}: no terminal to confirm \
+                             the enclosure is clear (pass --yes if it is)"
+                        );
+                        return exit::BAD_INPUT;
+                    }
+                }
+            }
+            ArmTarget::Remote { host: host.clone() }
+        }
+    };
+    let record = match (&args.record, record) {
+        (Some(path), _) => Some(path.clone()),
+        (None, true) => Some(default_record_path()),
+        (None, false) => None,
+    };
+    let request = RunRequest {
+        trajectory: args.trajectory,
+        lab,
+        rate_hz: args.rate,
+        speed_scale: args.speed_scale,
+        target,
+        record,
+        camera: args.camera,
+        light: args.light,
+        perception: args.perception,
+        rt: RtOptions {
+            fifo_priority: (args.rt_priority > 0).then_some(args.rt_priority),
+            lock_memory: true,
+            cpu: args.cpu,
+            spin: Duration::from_micros(args.spin_us),
+        },
+        plain_progress: args.plain || !std::io::stderr().is_terminal(),
+    };
+    match session::run(request) {
+        Ok(report) => {
+            println!("{}", report.summary());
+            report.exit_code
+        }
+        Err(e) => {
+            eprintln!("hitl run: {e}");
+            e.exit_code()
+        }
+    }
 }

@@ -1,0 +1,158 @@
+//! `hitl bench loop`: how punctually the real-time thread wakes, with and without load, side by
+//! side with a plain Python loop that sleeps for the period (what the official SDK's examples do).
+//!
+//! The measured loop is the controller's own: [`Periodic`] against absolute deadlines, the OS
+//! settings of [`crate::rt::os`], and a tick-sized piece of work (a slot read, a servo_j encode,
+//! telemetry pushes). Load is one busy thread per core doing recorder-like work (compression-sized
+//! memory traffic) and perception-like work (floating-point loops).
+
+use crate::rt::{os, Periodic, RtOptions};
+use crossbeam::queue::ArrayQueue;
+use serde_json::{json, Value};
+use std::process::Command;
+use std::sync::atomic::{AtomicBool, Ordering};
+use std::sync::Arc;
+use std::time::Duration;
+
+/// What to measure.
+#[derive(Debug, Clone)]
+pub struct LoopBenchOptions {
+    pub seconds: f64,
+    pub rate_hz: f64,
+    pub load: bool,
+    pub rt: RtOptions,
+    /// Python interpreter for the side-by-side loop (None: skip it).
+    pub python: Option<String>,
+}
+
+/// Percentiles of a sample, microseconds.
+fn percentiles_us(mut ns: Vec<u64>) -> Value {
+    if ns.is_empty() {
+        return json!(null);
+    }
+    ns.sort_unstable();
+    let at = |p: f64| ns[((ns.len() - 1) as f64 * p).round() as usize] as f64 / 1e3;
+    json!({ "p50_us": at(0.5), "p99_us": at(0.99), "p999_us": at(0.999), "max_us": at(1.0) })
+}
+
+/// Busy threads that keep both cores loaded until `stop`.
+fn spawn_load(stop: &Arc<AtomicBool>) -> Vec<std::thread::JoinHandle<()>> {
+    let cores = std::thread::available_parallelism().map_or(2, |n| n.get());
+    (0..cores)
+        .map(|i| {
+            let stop = Arc::clone(stop);
+            std::thread::spawn(move || {
+                let mut buf = vec![0u8; 8 << 20];
+                let mut x = 1.0f64;
+                while !stop.load(Ordering::Relaxed) {
+                    if i % 2 == 0 {
+                        // Recorder-like: stream through a frame-sized buffer.
+                        for (k, b) in buf.iter_mut().enumerate() {
+                            *b = b.wrapping_mul(31).wrapping_add(k as u8);
+                        }
+                    } else {
+                        // Perception-like: dense floating point.
+                        for k in 0..200_000 {
+                            x = (x * 1.000001 + k as f64).sqrt();
+                        }
+                    }
+                    std::hint::black_box((&buf, x));
+                }
+            })
+        })
+        .collect()
+}
+
+/// Run the controller's periodic loop and collect wake lateness.
+fn measure_rust(opts: &LoopBenchOptions) -> Value {
+    let stop = Arc::new(AtomicBool::new(false));
+    let load = if opts.load { spawn_load(&stop) } else { Vec::new() };
+    let ticks = (opts.seconds * opts.rate_hz).round() as usize;
+    let rt = opts.rt;
+    let period = Duration::from_secs_f64(1.0 / opts.rate_hz);
+    let handle = std::thread::Builder::new()
+        .name("hitl-bench-rt".into())
+        .spawn(move || {
+            let report = os::apply(&rt);
+            let queue = ArrayQueue::<[f64; 8]>::new(1024);
+            let mut late = Vec::with_capacity(ticks);
+            let mut overruns = 0u64;
+            let mut buf = [0u8; 64];
+            let mut clock = Periodic::new(period, rt.spin);
+            for _ in 0..ticks {
+                let wake = clock.wait();
+                late.push(wake.late_ns);
+                overruns += u64::from(wake.overrun);
+                // Tick-sized work: encode a setpoint, push telemetry.
+                let q = [wake.tick as f64 * 1e-6; 7];
+                for (j, v) in q.iter().enumerate() {
+                    buf[j * 4..j * 4 + 4].copy_from_slice(&(*v as f32).to_le_bytes());
+                }
+                let _ = queue.force_push([q[0], q[1], q[2], q[3], q[4], q[5], q[6], 0.0]);
+                std::hint::black_box(&buf);
+            }
+            (late, overruns, report)
+        })
+        .expect("bench thread");
+    let (late, overruns, report) = handle.join().unwrap_or_default();
+    stop.store(true, Ordering::Relaxed);
+    for t in load {
+        let _ = t.join();
+    }
+    let mut v = percentiles_us(late.clone());
+    v["overruns"] = json!(overruns);
+    v["ticks"] = json!(late.len());
+    v["rt"] = json!(report.summary());
+    v["fallbacks"] = json!(report.fallbacks);
+    v
+}
+
+/// The same loop in plain Python: `time.sleep(period)` per iteration, lateness measured against
+/// the absolute schedule the controller keeps.
+fn measure_python(opts: &LoopBenchOptions, python: &str) -> Value {
+    let script = concat!(env!("CARGO_MANIFEST_DIR"), "/scripts/bench_loop.py");
+    let stop = Arc::new(AtomicBool::new(false));
+    let load = if opts.load { spawn_load(&stop) } else { Vec::new() };
+    let out = Command::new(python)
+        .arg(script)
+        .arg(opts.seconds.to_string())
+        .arg(opts.rate_hz.to_string())
+        .output();
+    stop.store(true, Ordering::Relaxed);
+    for t in load {
+        let _ = t.join();
+    }
+    match out {
+        Ok(o) if o.status.success() => serde_json::from_slice(&o.stdout)
+            .unwrap_or_else(|e| json!({ "error": format!("bad output from {script}: {e}") })),
+        Ok(o) => json!({ "error": String::from_utf8_lossy(&o.stderr).trim().to_string() }),
+        Err(e) => json!({ "error": format!("cannot run {python}: {e}") }),
+    }
+}
+
+/// Run the benchmark: the controller's loop, then the Python loop, each idle and (when asked)
+/// under load.
+pub fn run(opts: &LoopBenchOptions) -> Value {
+    let mut cases = Vec::new();
+    let loads: &[bool] = if opts.load { &[false, true] } else { &[false] };
+    for &load in loads {
+        let o = LoopBenchOptions { load, ..opts.clone() };
+        let rust = measure_rust(&o);
+        let python = opts.python.as_deref().map(|py| measure_python(&o, py));
+        let ratio = python.as_ref().and_then(|p| {
+            Some(p.get("p99_us")?.as_f64()? / rust.get("p99_us")?.as_f64()?.max(1e-3))
+        });
+        cases.push(json!({
+            "load": load,
+            "hitl": rust,
+            "python_sleep_loop": python,
+            "p99_ratio_python_over_hitl": ratio,
+        }));
+    }
+    json!({
+        "bench": "loop",
+        "rate_hz": opts.rate_hz,
+        "seconds": opts.seconds,
+        "cases": cases,
+    })
+}

@@ -1,0 +1,4 @@
+//! Benchmarks behind `hitl bench`: each returns one JSON object of figures. The README's figures
+//! come from these (with the command that produced them).
+
+pub mod loop_timing;

@@ -1,0 +1,20 @@
+//! The run: everything between "the operator asked to play this trajectory" and the exit code.
+//!
+//! - [`setpoint`]: a commanded joint state and the phases a setpoint can belong to;
+//! - [`interlocks`]: what can trip a run, what each trip means (stop with motion, or hold) and
+//!   which exit code it ends with;
+//! - [`motion`]: jerk-limited moves planned with Ruckig (the approach, and stops);
+//! - [`stop`]: the stop planner thread that turns a trip into a Ruckig stop without the tick
+//!   allocating or waiting;
+//! - [`telemetry`]: what the tick hands out (bounded lock-free, never blocking);
+//! - [`tick`]: the real-time loop itself, short and readable top to bottom;
+//! - [`session`]: connect, preflight, open devices, enable, approach, playback, settle, done.
+
+pub mod interlocks;
+pub mod motion;
+pub mod progress;
+pub mod session;
+pub mod setpoint;
+pub mod stop;
+pub mod telemetry;
+pub mod tick;

@@ -1,0 +1,53 @@
+//! A commanded joint state, and the phase of the run it belongs to.
+
+use hitl_hal::Joints;
+
+/// Position, velocity and acceleration commanded for one tick.
+#[derive(Debug, Clone, Copy, PartialEq, Default)]
+pub struct Setpoint {
+    pub q: Joints,
+    pub qd: Joints,
+    pub qdd: Joints,
+}
+
+impl Setpoint {
+    /// At rest at `q`.
+    pub fn rest(q: Joints) -> Self {
+        Self { q, qd: [0.0; 7], qdd: [0.0; 7] }
+    }
+
+    /// Where this setpoint goes in `dt` seconds at constant acceleration: a bridge of a tick or
+    /// two while a stop plan is being made.
+    pub fn extrapolate(&self, dt: f64) -> Self {
+        let mut next = *self;
+        for j in 0..7 {
+            next.q[j] = self.q[j] + self.qd[j] * dt + 0.5 * self.qdd[j] * dt * dt;
+            next.qd[j] = self.qd[j] + self.qdd[j] * dt;
+        }
+        next
+    }
+}
+
+/// The phase a setpoint belongs to, as recorded on `/arm/setpoint`.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Phase {
+    /// The slow, checked move from the arm's pose to the first waypoint.
+    Approach,
+    /// The trajectory itself.
+    Playback,
+    /// Holding the last waypoint until the arm has arrived.
+    Settle,
+    /// A jerk-limited stop after a trip or an operator stop.
+    Stop,
+}
+
+impl Phase {
+    pub fn as_str(self) -> &'static str {
+        match self {
+            Phase::Approach => "approach",
+            Phase::Playback => "playback",
+            Phase::Settle => "settle",
+            Phase::Stop => "stop",
+        }
+    }
+}

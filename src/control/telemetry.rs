@@ -1,0 +1,90 @@
+//! What the tick hands out, and the status the progress display reads.
+//!
+//! The tick calls a [`TelemetrySink`] with small `Copy` messages; a sink must never block or
+//! allocate (bounded lock-free queues that drop and count when full). [`LoopStatus`] is a set of
+//! atomics for the operator's progress line.
+
+use super::interlocks::Trip;
+use super::setpoint::{Phase, Setpoint};
+use hitl_hal::ArmState;
+use std::sync::atomic::{AtomicBool, AtomicU64, AtomicU8, Ordering};
+
+/// `/arm/setpoint`.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct SetpointOut {
+    pub tick: u64,
+    pub t_ns: u64,
+    pub phase: Phase,
+    pub setpoint: Setpoint,
+}
+
+/// `/loop/timing`.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct TimingOut {
+    pub tick: u64,
+    pub wake_late_ns: u64,
+    pub tick_ns: u64,
+    pub overrun: bool,
+}
+
+/// A capture fired by the tick (camera trigger), with the light level at that moment.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct CaptureOut {
+    pub tick: u64,
+    pub fired_ns: u64,
+    /// Index of the capture in the run (0, 1, ...).
+    pub index: u32,
+    /// The setpoint commanded at the capture tick.
+    pub commanded: Setpoint,
+    pub light_level: f32,
+}
+
+/// Where the tick's telemetry goes. Implementations must not block or allocate.
+pub trait TelemetrySink {
+    fn setpoint(&self, m: &SetpointOut);
+    fn timing(&self, m: &TimingOut);
+    fn arm_state(&self, s: &ArmState);
+    fn light(&self, t_ns: u64, level: f32);
+    fn capture(&self, c: &CaptureOut);
+    fn trip(&self, trip: &Trip);
+}
+
+/// A sink that keeps nothing (runs without a recording still count ticks in [`LoopStatus`]).
+#[derive(Debug, Default, Clone, Copy)]
+pub struct NoTelemetry;
+
+impl TelemetrySink for NoTelemetry {
+    fn setpoint(&self, _: &SetpointOut) {}
+    fn timing(&self, _: &TimingOut) {}
+    fn arm_state(&self, _: &ArmState) {}
+    fn light(&self, _: u64, _: f32) {}
+    fn capture(&self, _: &CaptureOut) {}
+    fn trip(&self, _: &Trip) {}
+}
+
+/// Live status of the loop for the progress line (atomics; written by the tick).
+#[derive(Debug, Default)]
+pub struct LoopStatus {
+    pub tick: AtomicU64,
+    pub phase: AtomicU8,
+    pub tripped: AtomicBool,
+    pub overruns: AtomicU64,
+    pub max_late_ns: AtomicU64,
+    pub captures: AtomicU64,
+    pub done: AtomicBool,
+}
+
+impl LoopStatus {
+    pub fn set_phase(&self, phase: Phase) {
+        self.phase.store(phase as u8, Ordering::Relaxed);
+    }
+
+    pub fn phase(&self) -> Phase {
+        match self.phase.load(Ordering::Relaxed) {
+            0 => Phase::Approach,
+            1 => Phase::Playback,
+            2 => Phase::Settle,
+            _ => Phase::Stop,
+        }
+    }
+}

@@ -1,0 +1,377 @@
+//! The real-time loop. One [`ControlLoop::tick`] per period: sense, check the interlocks, pick the
+//! setpoint, send it, fire captures and light, hand out telemetry. Everything it reads was
+//! prepared before the loop ([`Program`]); it allocates nothing, takes no lock, awaits nothing
+//! and writes no log. Statistics leave through the telemetry sink and [`LoopStatus`].
+
+use super::interlocks::{Device, Interlocks, Reaction, Sense, Trip, TripKind};
+use super::setpoint::{Phase, Setpoint};
+use super::stop::{StopPlan, StopRequest, StopRequester};
+use super::telemetry::{CaptureOut, LoopStatus, SetpointOut, TelemetrySink, TimingOut};
+use crate::rt::{probe, slot::SlotReader, Periodic, Wake};
+use hitl_hal::{
+    Arm, ArmState, CaptureRequest, Clock, Error as _, ErrorKind, Inputs, Light, MonotonicClock,
+    RgbdCamera,
+};
+use std::sync::atomic::{AtomicBool, AtomicU8, Ordering};
+use std::sync::Arc;
+use std::time::Duration;
+
+/// Ticks the loop may bridge a trip by extrapolation while the stop plan is made (100 ms at
+/// 250 Hz); past that it holds.
+const MAX_BRIDGE_TICKS: u64 = 25;
+
+/// Everything the loop plays, prepared (and checked) before it starts.
+#[derive(Debug, Clone, Default)]
+pub struct Program {
+    /// The approach from the arm's pose to the first waypoint, one setpoint per tick.
+    pub approach: Vec<Setpoint>,
+    /// The time-parametrised trajectory, one setpoint per tick.
+    pub playback: Vec<Setpoint>,
+    /// Per playback tick: fire a capture.
+    pub capture: Vec<bool>,
+    /// Per playback tick: the light level (empty: leave the light alone).
+    pub light: Vec<f32>,
+    /// The light takes its level this many ticks before the tick it is scheduled for.
+    pub light_lead_ticks: u64,
+    /// Settle: hold the last setpoint until every joint is within this of it...
+    pub settle_tolerance_rad: f64,
+    /// ...or this many ticks have passed.
+    pub settle_max_ticks: u64,
+}
+
+impl Program {
+    fn approach_ticks(&self) -> u64 {
+        self.approach.len() as u64
+    }
+    fn playback_end(&self) -> u64 {
+        self.approach_ticks() + self.playback.len() as u64
+    }
+}
+
+/// Flags raised outside the loop that the tick reads each period (lock-free).
+#[derive(Debug, Default, Clone)]
+pub struct Health {
+    /// Ctrl-C.
+    pub operator_stop: Arc<AtomicBool>,
+    /// The recorder cannot write.
+    pub recorder_failed: Arc<AtomicBool>,
+    /// A device failed outside the tick (frame intake, serial task): 0 none, else `Device` + 1.
+    pub device_failed: Arc<AtomicU8>,
+}
+
+impl Health {
+    /// Report a device failure from outside the tick.
+    pub fn device_failed(&self, device: Device) {
+        let code = device as u8 + 1;
+        let _ = self.device_failed.compare_exchange(0, code, Ordering::AcqRel, Ordering::Acquire);
+    }
+
+    fn failed_device(&self) -> Option<Device> {
+        match self.device_failed.load(Ordering::Acquire) {
+            0 => None,
+            1 => Some(Device::Camera),
+            2 => Some(Device::Light),
+            3 => Some(Device::Trigger),
+            _ => Some(Device::Inputs),
+        }
+    }
+}
+
+/// The devices the loop drives; the loop does not know which implementations are behind them.
+pub struct Devices<A, C, L, I> {
+    pub arm: A,
+    pub camera: C,
+    pub light: L,
+    pub inputs: I,
+}
+
+/// How a run ended.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub enum Outcome {
+    /// Played to the end and settled on the last waypoint.
+    Completed { ticks: u64, settled: bool },
+    /// An interlock or the operator stopped it; `stopped` says the controlled stop completed.
+    Tripped { trip: Trip, stopped: bool },
+}
+
+enum Flow {
+    Continue,
+    Done(Outcome),
+}
+
+/// The loop's connections to the rest of the controller.
+pub struct LoopIo<T> {
+    /// Arm reports from the reader thread.
+    pub reports: SlotReader<ArmState>,
+    pub telemetry: T,
+    pub status: Arc<LoopStatus>,
+    pub health: Health,
+    pub stop: StopRequester,
+    /// The clock arm reports are stamped on (the watchdog compares against it).
+    pub clock: MonotonicClock,
+}
+
+/// The loop and all the state it keeps between ticks.
+pub struct ControlLoop<'p, A, C, L, I, T> {
+    program: &'p Program,
+    devices: Devices<A, C, L, I>,
+    reports: SlotReader<ArmState>,
+    telemetry: T,
+    status: Arc<LoopStatus>,
+    health: Health,
+    interlocks: Interlocks,
+    stop: StopRequester,
+    clock: MonotonicClock,
+    dt: f64,
+    last_sent: Setpoint,
+    last_sent_tick: u64,
+    trip: Option<Trip>,
+    stop_plan: Option<StopPlan>,
+    light_level: f32,
+    captures: u32,
+    device_failed: Option<Device>,
+}
+
+impl<'p, A, C, L, I, T> ControlLoop<'p, A, C, L, I, T>
+where
+    A: Arm,
+    C: RgbdCamera,
+    L: Light,
+    I: Inputs,
+    T: TelemetrySink,
+{
+    /// A loop that starts from the arm at rest at `start`.
+    pub fn new(
+        program: &'p Program,
+        devices: Devices<A, C, L, I>,
+        io: LoopIo<T>,
+        interlocks: Interlocks,
+        rate_hz: f64,
+        start: &hitl_hal::Joints,
+    ) -> Self {
+        Self {
+            program,
+            devices,
+            reports: io.reports,
+            telemetry: io.telemetry,
+            status: io.status,
+            health: io.health,
+            interlocks,
+            stop: io.stop,
+            clock: io.clock,
+            dt: 1.0 / rate_hz,
+            last_sent: Setpoint::rest(*start),
+            last_sent_tick: 0,
+            trip: None,
+            stop_plan: None,
+            light_level: f32::NAN,
+            captures: 0,
+            device_failed: None,
+        }
+    }
+
+    /// Run on the calling thread until the program ends or a trip has been handled. The caller
+    /// has applied the OS real-time settings to this thread.
+    pub fn run(mut self, spin: Duration) -> (Outcome, Devices<A, C, L, I>) {
+        let mut clock = Periodic::new(Duration::from_secs_f64(self.dt), spin);
+        let outcome = {
+            let _in_loop = probe::enter_rt_loop();
+            loop {
+                let wake = clock.wait();
+                if let Flow::Done(outcome) = self.tick(wake) {
+                    break outcome;
+                }
+            }
+        };
+        self.status.done.store(true, Ordering::Release);
+        (outcome, self.devices)
+    }
+
+    /// One period of work.
+    fn tick(&mut self, wake: Wake) -> Flow {
+        let k = wake.tick;
+        let now = self.clock.now_ns();
+
+        // 1. Sense.
+        let (arm, fresh) = self.reports.latest();
+        if let (Some(state), true) = (arm.as_ref(), fresh) {
+            self.telemetry.arm_state(state);
+        }
+        let inputs = match self.devices.inputs.read() {
+            Ok(inputs) => inputs,
+            Err(_) => {
+                self.device_failed.get_or_insert(Device::Inputs);
+                Default::default()
+            }
+        };
+
+        // 2. Interlocks (the first trip wins; none are evaluated once stopping).
+        if self.trip.is_none() {
+            let sense = Sense {
+                now_ns: now,
+                arm: arm.as_ref(),
+                commanded: &self.last_sent.q,
+                inputs,
+                operator_stop: self.health.operator_stop.load(Ordering::Relaxed),
+                recorder_failed: self.health.recorder_failed.load(Ordering::Relaxed),
+                device_failed: self.device_failed.or_else(|| self.health.failed_device()),
+                check_deviation: true,
+            };
+            if let Some(kind) = self.interlocks.check(&sense) {
+                if let Some(done) = self.begin_trip(kind, k, now) {
+                    return done;
+                }
+            }
+        }
+
+        // 3. The setpoint for this tick.
+        let (phase, setpoint) = match self.next_setpoint(k, arm.as_ref()) {
+            Ok(next) => next,
+            Err(outcome) => return Flow::Done(outcome),
+        };
+
+        // 4. Send it.
+        if let Err(e) = self.devices.arm.servo_joint(&setpoint.q) {
+            let kind = match e.kind() {
+                ErrorKind::DeviceFault | ErrorKind::InvalidRequest => {
+                    TripKind::ArmError { code: 0 }
+                }
+                _ => TripKind::ConnectionLost,
+            };
+            return self.fail_while_sending(kind, k, now);
+        }
+        self.last_sent = setpoint;
+        self.last_sent_tick = k;
+
+        // 5. Light and captures on the playback schedule.
+        if self.trip.is_none() {
+            self.schedule_light_and_capture(k, now, &setpoint);
+        }
+
+        // 6. Telemetry and status.
+        self.telemetry.setpoint(&SetpointOut { tick: k, t_ns: now, phase, setpoint });
+        let tick_ns = self.clock.now_ns().saturating_sub(now);
+        self.telemetry.timing(&TimingOut {
+            tick: k,
+            wake_late_ns: wake.late_ns,
+            tick_ns,
+            overrun: wake.overrun,
+        });
+        self.status.tick.store(k, Ordering::Relaxed);
+        self.status.set_phase(phase);
+        self.status.max_late_ns.fetch_max(wake.late_ns, Ordering::Relaxed);
+        if wake.overrun {
+            self.status.overruns.fetch_add(1, Ordering::Relaxed);
+        }
+        Flow::Continue
+    }
+
+    /// Approach, playback, settle or stop: which setpoint tick `k` sends, or the end of the run.
+    fn next_setpoint(
+        &mut self,
+        k: u64,
+        arm: Option<&ArmState>,
+    ) -> Result<(Phase, Setpoint), Outcome> {
+        let p = self.program;
+        if let Some(trip) = self.trip {
+            return self.stop_setpoint(k, trip).map(|sp| (Phase::Stop, sp));
+        }
+        if k < p.approach_ticks() {
+            return Ok((Phase::Approach, p.approach[k as usize]));
+        }
+        if k < p.playback_end() {
+            return Ok((Phase::Playback, p.playback[(k - p.approach_ticks()) as usize]));
+        }
+        let goal = p.playback.last().or(p.approach.last()).copied().unwrap_or(self.last_sent);
+        let settled = arm.is_some_and(|a| {
+            a.q.iter().zip(goal.q.iter()).all(|(m, c)| (m - c).abs() <= p.settle_tolerance_rad)
+        });
+        let settle_ticks = k - p.playback_end();
+        if settled || settle_ticks >= p.settle_max_ticks {
+            return Err(Outcome::Completed { ticks: k, settled });
+        }
+        Ok((Phase::Settle, Setpoint::rest(goal.q)))
+    }
+
+    /// The stop's setpoint for tick `k`: from the plan, a bridge until it arrives, or the end.
+    fn stop_setpoint(&mut self, k: u64, trip: Trip) -> Result<Setpoint, Outcome> {
+        if self.stop_plan.is_none() {
+            self.stop_plan = self.stop.poll();
+        }
+        match &self.stop_plan {
+            Some(plan) if plan.is_empty() => Err(self.hold(trip)),
+            Some(plan) => plan.at(k).copied().ok_or(Outcome::Tripped { trip, stopped: true }),
+            None if k - trip.tick <= MAX_BRIDGE_TICKS => Ok(self.last_sent.extrapolate(self.dt)),
+            None => Err(self.hold(trip)),
+        }
+    }
+
+    /// Record a trip and start its reaction. Returns the end of the run when it is a hold.
+    fn begin_trip(&mut self, kind: TripKind, k: u64, now: u64) -> Option<Flow> {
+        let trip = Trip { kind, tick: k, t_ns: now };
+        self.trip = Some(trip);
+        self.telemetry.trip(&trip);
+        self.status.tripped.store(true, Ordering::Relaxed);
+        match kind.reaction() {
+            Reaction::ControlledStop => {
+                self.stop
+                    .request(StopRequest { from: self.last_sent, from_tick: self.last_sent_tick });
+                None
+            }
+            Reaction::Hold => Some(Flow::Done(self.hold(trip))),
+        }
+    }
+
+    /// Tell the arm to stop where it is (if it still hears us) and end the run.
+    fn hold(&mut self, trip: Trip) -> Outcome {
+        let _ = self.devices.arm.stop();
+        Outcome::Tripped { trip, stopped: false }
+    }
+
+    /// Sending failed: the first trip if none yet, else the stop in progress ends here.
+    fn fail_while_sending(&mut self, kind: TripKind, k: u64, now: u64) -> Flow {
+        match self.trip {
+            Some(trip) => Flow::Done(Outcome::Tripped { trip, stopped: false }),
+            None => {
+                let trip = Trip { kind, tick: k, t_ns: now };
+                self.trip = Some(trip);
+                self.telemetry.trip(&trip);
+                self.status.tripped.store(true, Ordering::Relaxed);
+                Flow::Done(self.hold(trip))
+            }
+        }
+    }
+
+    /// Apply the light level `light_lead_ticks` early, and fire the camera at capture ticks.
+    fn schedule_light_and_capture(&mut self, k: u64, now: u64, commanded: &Setpoint) {
+        let p = self.program;
+        let first = p.approach_ticks();
+        if let Some(j) = (k + p.light_lead_ticks).checked_sub(first) {
+            if let Some(&level) = p.light.get(j as usize) {
+                if level != self.light_level {
+                    if self.devices.light.set_level(level).is_err() {
+                        self.device_failed.get_or_insert(Device::Light);
+                    }
+                    self.light_level = level;
+                    self.telemetry.light(now, level);
+                }
+            }
+        }
+        let Some(i) = k.checked_sub(first) else { return };
+        if !p.capture.get(i as usize).copied().unwrap_or(false) {
+            return;
+        }
+        if self.devices.camera.trigger(CaptureRequest { tick: k, fired_ns: now }).is_err() {
+            self.device_failed.get_or_insert(Device::Camera);
+        }
+        self.telemetry.capture(&CaptureOut {
+            tick: k,
+            fired_ns: now,
+            index: self.captures,
+            commanded: *commanded,
+            light_level: self.light_level,
+        });
+        self.captures += 1;
+        self.status.captures.fetch_add(1, Ordering::Relaxed);
+    }
+}

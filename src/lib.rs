@@ -1,0 +1,14 @@
+//! `hitl` as a library: the controller's parts, so that integration tests and benchmarks can drive
+//! the same code the binary runs.
+//!
+//! - [`rt`]: the real-time thread: fixed period, absolute deadlines, OS real-time settings;
+//! - [`control`]: the run (state machine, interlocks, the tick, approach and stop planning);
+//! - [`devices`]: absent ("none") devices and device choices;
+//! - [`cli`]: one module per subcommand; [`exit`]: the contract's exit codes.
+
+pub mod bench;
+pub mod cli;
+pub mod control;
+pub mod devices;
+pub mod exit;
+pub mod rt;

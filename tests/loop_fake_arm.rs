@@ -1,0 +1,256 @@
+//! The control loop against an in-process arm that follows every command exactly: the loop's
+//! logic on its own (phases, trips, stops), and the proof that the tick allocates nothing.
+//! (End-to-end runs against the MuJoCo stub are in `run_stub.rs`.)
+
+use hitl::control::interlocks::{Interlocks, Thresholds, TripKind};
+use hitl::control::motion::{plan_move, MoveLimits};
+use hitl::control::setpoint::Setpoint;
+use hitl::control::stop::StopPlanner;
+use hitl::control::telemetry::{LoopStatus, NoTelemetry};
+use hitl::control::tick::{ControlLoop, Devices, Health, LoopIo, Outcome, Program};
+use hitl::devices::none::{NoCamera, NoInputs, NoLight};
+use hitl::rt::probe;
+use hitl::rt::slot::LatestSlot;
+use hitl_hal::{Arm, ArmState, Clock, ErrorKind, ErrorType, Joints, MonotonicClock};
+use std::alloc::{GlobalAlloc, Layout, System};
+use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
+use std::sync::Arc;
+use std::time::Duration;
+
+/// Counts allocations made on a thread while it is inside the real-time loop.
+struct CountingAllocator;
+
+static RT_ALLOCATIONS: AtomicU64 = AtomicU64::new(0);
+
+// SAFETY: delegates to the system allocator unchanged; only counts.
+#[allow(unsafe_code)]
+unsafe impl GlobalAlloc for CountingAllocator {
+    unsafe fn alloc(&self, layout: Layout) -> *mut u8 {
+        if probe::in_rt_loop() {
+            RT_ALLOCATIONS.fetch_add(1, Ordering::Relaxed);
+        }
+        // SAFETY: same contract as the caller's.
+        unsafe { System.alloc(layout) }
+    }
+    unsafe fn dealloc(&self, ptr: *mut u8, layout: Layout) {
+        // SAFETY: same contract as the caller's.
+        unsafe { System.dealloc(ptr, layout) }
+    }
+    unsafe fn realloc(&self, ptr: *mut u8, layout: Layout, new_size: usize) -> *mut u8 {
+        if probe::in_rt_loop() {
+            RT_ALLOCATIONS.fetch_add(1, Ordering::Relaxed);
+        }
+        // SAFETY: same contract as the caller's.
+        unsafe { System.realloc(ptr, layout, new_size) }
+    }
+}
+
+#[global_allocator]
+static ALLOCATOR: CountingAllocator = CountingAllocator;
+
+/// What the fake arm does at a given command count.
+#[derive(Clone, Copy, Default)]
+struct Script {
+    /// After this many commands, offset joint 3's report by 0.2 rad.
+    deviate_after: Option<usize>,
+    /// After this many commands, the connection fails.
+    disconnect_after: Option<usize>,
+}
+
+struct FakeArm {
+    sent: Vec<Joints>,
+    reports: LatestSlot<ArmState>,
+    script: Script,
+    stopped: bool,
+    clock: MonotonicClock,
+}
+
+impl ErrorType for FakeArm {
+    type Error = ErrorKind;
+}
+
+impl Arm for FakeArm {
+    fn enable_servo(&mut self) -> Result<(), ErrorKind> {
+        Ok(())
+    }
+    fn servo_joint(&mut self, q: &Joints) -> Result<(), ErrorKind> {
+        if self.script.disconnect_after.is_some_and(|n| self.sent.len() >= n) {
+            return Err(ErrorKind::Disconnected);
+        }
+        self.sent.push(*q);
+        let mut measured = *q;
+        if self.script.deviate_after.is_some_and(|n| self.sent.len() >= n) {
+            measured[3] += 0.2;
+        }
+        self.reports.publish(ArmState {
+            received_ns: self.clock.now_ns(),
+            q: measured,
+            seq: self.sent.len() as u64,
+            ..Default::default()
+        });
+        Ok(())
+    }
+    fn stop(&mut self) -> Result<(), ErrorKind> {
+        self.stopped = true;
+        Ok(())
+    }
+    fn joint_positions(&mut self) -> Result<Joints, ErrorKind> {
+        Ok(self.sent.last().copied().unwrap_or([0.0; 7]))
+    }
+    fn codes(&mut self) -> Result<(u8, u8), ErrorKind> {
+        Ok((0, 0))
+    }
+}
+
+const RATE: f64 = 250.0;
+const START: Joints = [0.0, 0.3, 0.0, 1.2, 0.0, 0.9, 0.0];
+
+/// A 1 s playback: joint 1 swings 0.1 rad and back, beginning 0.05 rad from the start pose.
+fn program() -> Program {
+    let dt = 1.0 / RATE;
+    let mut first = START;
+    first[0] = 0.05;
+    let approach =
+        plan_move(&START, &first, &MoveLimits::uniform(0.3, 0.8, 8.0), dt).expect("approach");
+    let playback: Vec<Setpoint> = (0..250)
+        .map(|k| {
+            let t = k as f64 * dt;
+            let mut q = first;
+            q[0] = 0.05 + 0.05 * (1.0 - (std::f64::consts::PI * t).cos());
+            let mut sp = Setpoint::rest(q);
+            sp.qd[0] = 0.05 * std::f64::consts::PI * (std::f64::consts::PI * t).sin();
+            sp
+        })
+        .collect();
+    let n = playback.len();
+    Program {
+        approach,
+        playback,
+        capture: (0..n).map(|i| i % 50 == 0).collect(),
+        light: vec![1.0; n],
+        light_lead_ticks: 2,
+        settle_tolerance_rad: 1e-3,
+        settle_max_ticks: 50,
+    }
+}
+
+struct Ran {
+    outcome: Outcome,
+    sent: Vec<Joints>,
+    stopped: bool,
+    allocations: u64,
+}
+
+fn run(program: &Program, script: Script, operator_stop_at: Option<u64>) -> Ran {
+    let clock = MonotonicClock::new();
+    let (slot, reports) = LatestSlot::new();
+    slot.publish(ArmState { received_ns: clock.now_ns(), q: START, ..Default::default() });
+    let arm =
+        FakeArm { sent: Vec::with_capacity(10_000), reports: slot, script, stopped: false, clock };
+    let health = Health::default();
+    let status = Arc::new(LoopStatus::default());
+    let limits = MoveLimits::uniform(1.0, 4.0, 60.0);
+    let (_planner, stop) = StopPlanner::start(limits, 1.0 / RATE, 5.0).expect("planner");
+    let interlocks = Interlocks::new(Thresholds {
+        report_timeout_ns: 100_000_000,
+        max_deviation_rad: 0.08,
+        trip_on_warning: true,
+    });
+    if let Some(at) = operator_stop_at {
+        let (flag, status) = (Arc::clone(&health.operator_stop), Arc::clone(&status));
+        std::thread::spawn(move || {
+            while status.tick.load(Ordering::Relaxed) < at {
+                std::thread::sleep(Duration::from_millis(1));
+            }
+            flag.store(true, Ordering::Relaxed);
+        });
+    }
+    let devices = Devices { arm, camera: NoCamera, light: NoLight, inputs: NoInputs };
+    let io = LoopIo { reports, telemetry: NoTelemetry, status, health, stop, clock };
+    let control = ControlLoop::new(program, devices, io, interlocks, RATE, &START);
+    let before = RT_ALLOCATIONS.load(Ordering::Relaxed);
+    let (outcome, devices) = control.run(Duration::ZERO);
+    let allocations = RT_ALLOCATIONS.load(Ordering::Relaxed) - before;
+    Ran { outcome, sent: devices.arm.sent, stopped: devices.arm.stopped, allocations }
+}
+
+static SERIAL: AtomicBool = AtomicBool::new(false);
+
+/// The allocation counter is process-wide: run these tests one at a time.
+fn serial() -> impl Drop {
+    struct Release;
+    impl Drop for Release {
+        fn drop(&mut self) {
+            SERIAL.store(false, Ordering::Release);
+        }
+    }
+    while SERIAL.compare_exchange(false, true, Ordering::AcqRel, Ordering::Acquire).is_err() {
+        std::thread::sleep(Duration::from_millis(5));
+    }
+    Release
+}
+
+#[test]
+fn a_whole_playback_sends_approach_then_trajectory_and_allocates_nothing() {
+    let _one = serial();
+    let p = program();
+    let ran = run(&p, Script::default(), None);
+    assert!(matches!(ran.outcome, Outcome::Completed { settled: true, .. }), "{:?}", ran.outcome);
+    assert_eq!(ran.allocations, 0, "the tick allocated");
+    let expected: Vec<Joints> = p.approach.iter().chain(p.playback.iter()).map(|s| s.q).collect();
+    assert_eq!(
+        &ran.sent[..expected.len()],
+        &expected[..],
+        "setpoints are the program, bit for bit"
+    );
+    assert_eq!(ran.sent.last(), expected.last(), "settles on the last waypoint");
+    assert!(!ran.stopped);
+}
+
+#[test]
+fn operator_stop_decelerates_with_a_ruckig_stop_and_exits_130() {
+    let _one = serial();
+    let p = program();
+    let trip_at = p.approach.len() as u64 + 120;
+    let ran = run(&p, Script::default(), Some(trip_at));
+    let Outcome::Tripped { trip, stopped } = ran.outcome else { panic!("{:?}", ran.outcome) };
+    assert_eq!(trip.kind, TripKind::OperatorStop);
+    assert!(stopped, "the controlled stop completed");
+    assert_eq!(trip.kind.exit_code(), 130);
+    assert_eq!(ran.allocations, 0, "the trip path allocated on the loop thread");
+    // After the trip the commands stop short of the program and come to rest smoothly.
+    let k = trip.tick as usize;
+    let tail = &ran.sent[k..];
+    assert!(tail.len() < p.approach.len() + p.playback.len() - k);
+    let steps: Vec<f64> = tail.windows(2).map(|w| w[1][0] - w[0][0]).collect();
+    assert!(steps.last().expect("steps").abs() < 1e-6, "at rest at the end");
+    for w in steps.windows(2) {
+        assert!((w[1] - w[0]).abs() <= 4.0 / RATE / RATE + 1e-9, "acceleration limited");
+    }
+}
+
+#[test]
+fn deviation_trips_and_stops() {
+    let _one = serial();
+    let p = program();
+    let n = p.approach.len() + 60;
+    let ran = run(&p, Script { deviate_after: Some(n), ..Default::default() }, None);
+    let Outcome::Tripped { trip, stopped } = ran.outcome else { panic!("{:?}", ran.outcome) };
+    assert!(matches!(trip.kind, TripKind::Deviation { joint: 3, .. }), "{:?}", trip.kind);
+    assert!(stopped);
+    assert_eq!(trip.kind.exit_code(), 4);
+}
+
+#[test]
+fn a_lost_connection_holds_and_exits_5() {
+    let _one = serial();
+    let p = program();
+    let n = p.approach.len() + 30;
+    let ran = run(&p, Script { disconnect_after: Some(n), ..Default::default() }, None);
+    let Outcome::Tripped { trip, stopped } = ran.outcome else { panic!("{:?}", ran.outcome) };
+    assert_eq!(trip.kind, TripKind::ConnectionLost);
+    assert!(!stopped);
+    assert!(ran.stopped, "the arm was told to stop");
+    assert_eq!(ran.sent.len(), n);
+    assert_eq!(trip.kind.exit_code(), 5);
+}
