@@ -51,7 +51,8 @@ const SHADOW_GROUPS: [u8; 6] = [0, 1, 1, 0, 0, 0];
 /// A renderer with its own `MjData` on the lab model.
 pub struct Renderer {
     lab: LabModel,
-    data: MjData<Arc<MjModel>>,
+    /// One `MjData` per ray-casting thread (the first is the renderer's own).
+    data: Vec<MjData<Arc<MjModel>>>,
     /// The camera's own body: its geoms never block the view.
     camera_body: Option<usize>,
     arm_root: Option<usize>,
@@ -90,7 +91,8 @@ impl Renderer {
             let body = m.geom_bodyid()[g] as usize;
             is_target.push(target_root.is_some_and(|r| m.body_rootid()[body] == r));
         }
-        let data = MjData::new(m);
+        let threads = std::thread::available_parallelism().map_or(1, |n| n.get()).clamp(1, 8);
+        let data = (0..threads).map(|_| MjData::new(m.clone())).collect();
         Ok(Self {
             lab,
             data,
@@ -104,23 +106,46 @@ impl Renderer {
         })
     }
 
+    /// Cast rays on `threads` threads (1 to 64; default: the machine's cores, up to 8).
+    pub fn set_threads(&mut self, threads: usize) {
+        let q = self.joints();
+        let threads = threads.clamp(1, 64);
+        self.data.truncate(threads);
+        while self.data.len() < threads {
+            self.data.push(MjData::new(self.lab.model.clone()));
+        }
+        self.set_joints(&q);
+    }
+
+    /// Ray-casting threads in use.
+    pub fn threads(&self) -> usize {
+        self.data.len()
+    }
+
+    fn joints(&self) -> Joints {
+        let qpos = self.data[0].qpos();
+        std::array::from_fn(|j| qpos[self.lab.qpos_adr[j]])
+    }
+
     /// Put the arm at `q` and compute the kinematics.
     pub fn set_joints(&mut self, q: &Joints) {
-        {
-            let qpos = self.data.qpos_mut();
-            for j in 0..DOF {
-                qpos[self.lab.qpos_adr[j]] = q[j];
+        for data in &mut self.data {
+            {
+                let qpos = data.qpos_mut();
+                for j in 0..DOF {
+                    qpos[self.lab.qpos_adr[j]] = q[j];
+                }
             }
+            data.forward_kinematics();
         }
-        self.data.forward_kinematics();
     }
 
     /// Camera pose (OpenCV axes) in the lab frame for the current joints.
     pub fn camera_in_lab(&self) -> Isometry3<f64> {
         if let Some(s) = self.lab.camera_site {
-            pose(&self.data.site_xpos()[s], &self.data.site_xmat()[s])
+            pose(&self.data[0].site_xpos()[s], &self.data[0].site_xmat()[s])
         } else if let Some(c) = self.lab.camera {
-            let mj = pose(&self.data.cam_xpos()[c], &self.data.cam_xmat()[c]);
+            let mj = pose(&self.data[0].cam_xpos()[c], &self.data[0].cam_xmat()[c]);
             mj * UnitQuaternion::from_axis_angle(&Vector3::x_axis(), std::f64::consts::PI)
         } else {
             Isometry3::identity()
@@ -131,8 +156,8 @@ impl Renderer {
     pub fn base_in_lab(&self) -> Isometry3<f64> {
         match self.arm_root {
             Some(b) => {
-                let p = self.data.xpos()[b];
-                let q = self.data.xquat()[b];
+                let p = self.data[0].xpos()[b];
+                let q = self.data[0].xquat()[b];
                 Isometry3::from_parts(
                     Translation3::new(p[0], p[1], p[2]),
                     UnitQuaternion::from_quaternion(nalgebra::Quaternion::new(
@@ -148,7 +173,7 @@ impl Renderer {
     pub fn sun_direction(&self) -> Vector3<f64> {
         let d = match (self.shading.sun_direction_lab, self.lab.sun) {
             (Some(d), _) => d,
-            (None, Some(l)) => Vector3::from(self.data.light_xdir()[l]),
+            (None, Some(l)) => Vector3::from(self.data[0].light_xdir()[l]),
             (None, None) => -Vector3::z(),
         };
         if d.norm() > 1e-12 && d.iter().all(|v| v.is_finite()) {
@@ -184,45 +209,97 @@ impl Renderer {
         self.normals.clear();
         self.normals.resize(n, [0.0; 3]);
         let origin = camera.translation.vector;
-        let origin_arr = [origin.x, origin.y, origin.z];
-        let (geoms, dist) = self.data.multi_ray(
-            &origin_arr,
-            &self.dirs,
-            None,
-            true,
-            self.camera_body,
-            1.0e6,
-            Some(&mut self.normals),
-        );
-        let optical = rot * Vector3::z();
-        let to_sun = -self.sun_direction();
-        let level = level.clamp(0.0, 1.0);
-        let ambient = self.shading.ambient.max(0.0);
+        let pass = Pass {
+            origin: [origin.x, origin.y, origin.z],
+            optical: rot * Vector3::z(),
+            to_sun: -self.sun_direction(),
+            level: level.clamp(0.0, 1.0),
+            ambient: self.shading.ambient.max(0.0),
+            shadows: self.shading.shadows,
+            camera_body: self.camera_body,
+            albedo: &self.albedo,
+            is_target: &self.is_target,
+        };
         let mut color = vec![0u8; 3 * n];
         let mut depth_m = vec![0.0f32; n];
         let mut mask = vec![0u8; n];
-        for i in 0..n {
+        // Contiguous chunks of pixels, one per thread, each with its own MjData.
+        let chunk = n.div_ceil(self.data.len()).max(1);
+        std::thread::scope(|scope| {
+            let mut work = self
+                .data
+                .iter_mut()
+                .zip(self.dirs.chunks(chunk))
+                .zip(self.normals.chunks_mut(chunk))
+                .zip(color.chunks_mut(3 * chunk))
+                .zip(depth_m.chunks_mut(chunk))
+                .zip(mask.chunks_mut(chunk))
+                .map(|(((((data, dirs), normals), color), depth), mask)| {
+                    (data, dirs, normals, color, depth, mask)
+                });
+            let first = work.next();
+            for (data, dirs, normals, color, depth, mask) in work {
+                let pass = &pass;
+                scope.spawn(move || pass.cast(data, dirs, normals, color, depth, mask));
+            }
+            if let Some((data, dirs, normals, color, depth, mask)) = first {
+                pass.cast(data, dirs, normals, color, depth, mask);
+            }
+        });
+        Image { intrinsics: *intr, color, depth_m, mask }
+    }
+}
+
+/// What every ray-casting thread of one frame shares.
+struct Pass<'a> {
+    origin: [f64; 3],
+    optical: Vector3<f64>,
+    to_sun: Vector3<f64>,
+    level: f32,
+    ambient: f32,
+    shadows: bool,
+    camera_body: Option<usize>,
+    albedo: &'a [[f32; 3]],
+    is_target: &'a [bool],
+}
+
+impl Pass<'_> {
+    /// Cast the rays `dirs` and shade their pixels.
+    fn cast(
+        &self,
+        data: &mut MjData<Arc<MjModel>>,
+        dirs: &[[f64; 3]],
+        normals: &mut [[f64; 3]],
+        color: &mut [u8],
+        depth_m: &mut [f32],
+        mask: &mut [u8],
+    ) {
+        let (geoms, dist) =
+            data.multi_ray(&self.origin, dirs, None, true, self.camera_body, 1.0e6, Some(normals));
+        let origin = Vector3::from(self.origin);
+        for i in 0..dirs.len() {
             let Some(g) = geoms[i] else { continue };
             let t = dist[i];
             if !(t >= 0.0 && t.is_finite()) {
                 continue;
             }
-            let d = Vector3::from(self.dirs[i]);
-            depth_m[i] = (t * d.dot(&optical)) as f32;
+            let d = Vector3::from(dirs[i]);
+            depth_m[i] = (t * d.dot(&self.optical)) as f32;
             let target = self.is_target[g];
             if target {
                 mask[i] = 255;
             }
-            let mut nrm = Vector3::from(self.normals[i]);
+            let mut nrm = Vector3::from(normals[i]);
             if nrm.dot(&d) > 0.0 {
                 nrm = -nrm;
             }
-            let mut lambert = nrm.dot(&to_sun).max(0.0);
-            if lambert > 0.0 && target && self.shading.shadows {
+            let mut lambert = nrm.dot(&self.to_sun).max(0.0);
+            if lambert > 0.0 && target && self.shadows {
                 let hit = Point3::from(origin + d * t + nrm * 1e-5);
-                let (blocker, _) = self.data.ray(
+                let to_sun = [self.to_sun.x, self.to_sun.y, self.to_sun.z];
+                let (blocker, _) = data.ray(
                     &[hit.x, hit.y, hit.z],
-                    &[to_sun.x, to_sun.y, to_sun.z],
+                    &to_sun,
                     Some(&SHADOW_GROUPS),
                     true,
                     None,
@@ -232,13 +309,12 @@ impl Renderer {
                     lambert = 0.0;
                 }
             }
-            let shade = ambient + level * lambert as f32;
+            let shade = self.ambient + self.level * lambert as f32;
             for c in 0..3 {
-                color[3 * i + c] =
-                    (self.albedo[g][c] * shade * 255.0).round().clamp(0.0, 255.0) as u8;
+                let v = (self.albedo[g][c] * shade * 255.0).round().clamp(0.0, 255.0);
+                color[3 * i + c] = v as u8;
             }
         }
-        Image { intrinsics: *intr, color, depth_m, mask }
     }
 }
 
