@@ -7,6 +7,7 @@
 //! - [`cli`]: one module per subcommand; [`exit`]: the contract's exit codes.
 
 pub mod bench;
+pub mod capture;
 pub mod cli;
 pub mod control;
 pub mod devices;

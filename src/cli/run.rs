@@ -40,6 +40,15 @@ pub struct RunArgs {
     /// Pose estimation on captured frames: icp, onnx:MODEL, or none.
     #[arg(long, default_value = "none", value_name = "icp|onnx:MODEL|none")]
     pub perception: String,
+    /// Simulated camera intrinsics: nfov, wfov (the paper's presets) or orbbec.
+    #[arg(long, default_value = "orbbec", value_name = "nfov|wfov|orbbec")]
+    pub camera_preset: String,
+    /// Simulated camera resolution (intrinsics scaled to it), e.g. 320x256.
+    #[arg(long, value_name = "WxH", value_parser = parse_size)]
+    pub camera_size: Option<(u32, u32)>,
+    /// Target model: asymmetric, one-plane, two-planes (built in) or an OBJ/STL file.
+    #[arg(long, default_value = "asymmetric", value_name = "NAME|FILE")]
+    pub target_model: String,
     /// Inject a stub fault at a time into the run (repeatable): drop-connection, stall-reports,
     /// arm-error, deviation, estop, door-open; e.g. `--stub-fault estop@2.5`.
     #[arg(long = "stub-fault", value_name = "KIND@SECONDS")]
@@ -59,6 +68,15 @@ pub struct RunArgs {
     /// Print plain progress lines even on a terminal.
     #[arg(long)]
     pub plain: bool,
+}
+
+fn parse_size(s: &str) -> Result<(u32, u32), String> {
+    let (w, h) = s.split_once(['x', 'X']).ok_or("expected WIDTHxHEIGHT, e.g. 320x256")?;
+    let parse = |v: &str| v.trim().parse::<u32>().ok().filter(|n| (8..=8192).contains(n));
+    match (parse(w), parse(h)) {
+        (Some(w), Some(h)) => Ok((w, h)),
+        _ => Err(format!("'{s}': width and height must be whole numbers from 8 to 8192")),
+    }
 }
 
 /// Ask the operator to confirm the enclosure is clear; `None` when there is no one to ask.
@@ -135,6 +153,9 @@ pub fn run(args: RunArgs, record: bool) -> u8 {
         camera: args.camera,
         light: args.light,
         perception: args.perception,
+        camera_preset: args.camera_preset,
+        camera_size: args.camera_size,
+        target_model: args.target_model,
         rt: RtOptions {
             fifo_priority: (args.rt_priority > 0).then_some(args.rt_priority),
             lock_memory: true,

@@ -6,9 +6,20 @@ use super::interlocks::{Interlocks, Thresholds};
 use super::motion::{plan_move, MoveLimits};
 use super::setpoint::Setpoint;
 use super::stop::StopPlanner;
-use super::telemetry::{LoopStatus, NoTelemetry};
+use super::telemetry::LoopStatus;
 use super::tick::{ControlLoop, Devices, Health, LoopIo, Outcome, Program};
+use crate::capture::intake::{Intake, IntakeOutputs, IntakeStats};
+use crate::capture::sink::{IntakeQueues, RunTelemetry};
+use crate::capture::truth::LabFrames;
+#[cfg(feature = "stub")]
+use crate::capture::sim_light::SimLight;
+use crate::devices::any::{RunCamera, RunLight};
 use crate::devices::inputs::RunInputs;
+use hitl_drivers::light::{LightSpec, SerialLight};
+use hitl_perception::{backend_from_spec, spawn_worker, BackendSpec, ReregisterPolicy};
+use hitl_record::{EventKind, PoseStamped, Recorder, RecorderHandle, RunMetadata, SafetyEventMsg, SunPhaseTrack, Telemetry};
+use hitl_hal::RgbdCamera as _;
+use sha2::Digest as _;
 use crate::devices::none::{NoCamera, NoInputs, NoLight};
 use crate::exit;
 use crate::rt::{self, slot::LatestSlot, RtOptions};
@@ -44,6 +55,11 @@ pub struct RunRequest {
     pub camera: String,
     pub light: String,
     pub perception: String,
+    /// Simulated camera intrinsics preset (nfov, wfov, orbbec) and size.
+    pub camera_preset: String,
+    pub camera_size: Option<(u32, u32)>,
+    /// Target model: a built-in name (asymmetric, one-plane, two-planes) or an OBJ/STL path.
+    pub target_model: String,
     pub rt: RtOptions,
     pub plain_progress: bool,
 }
@@ -83,6 +99,11 @@ pub struct RunReport {
     /// Where the stub's arm ended (stub runs only).
     pub stub_final_q: Option<Joints>,
     pub recording: Option<PathBuf>,
+    pub intake: IntakeStats,
+    /// Pose estimates the perception worker returned.
+    pub estimates: u64,
+    /// Why the recording could not be closed properly, if so.
+    pub record_error: Option<String>,
 }
 
 impl RunReport {
@@ -109,8 +130,22 @@ impl RunReport {
             self.overruns,
             self.rt.summary()
         );
+        if self.intake.frames > 0 {
+            s.push_str(&format!(
+                "\nframes {} (recorded {}, not recorded {}), sync error mean {:.2} ms max {:.2} ms, pose estimates {}",
+                self.intake.frames,
+                self.intake.recorded,
+                self.intake.not_recorded,
+                self.intake.sync_error_mean_ns / 1e6,
+                self.intake.sync_error_max_ns as f64 / 1e6,
+                self.estimates
+            ));
+        }
         if let Some(path) = &self.recording {
             s.push_str(&format!("\nrecording: {}", path.display()));
+        }
+        if let Some(e) = &self.record_error {
+            s.push_str(&format!("\nrecording FAILED: {e}"));
         }
         s.push_str(&format!("\nexit code {}", self.exit_code));
         s
@@ -251,58 +286,218 @@ fn first_report(
     None
 }
 
-/// The embedded stub, when the run targets it.
+/// The embedded stub, when the run targets it: the arm server, and the pieces of the scene the
+/// simulated camera and light share with it.
 #[cfg(feature = "stub")]
 struct EmbeddedStub {
     handle: hitl_sim_stub::StubHandle,
+    lab_model: hitl_sim_stub::mujoco_plant::LabModel,
+    arm: hitl_sim_stub::mujoco_plant::SharedArmState,
+    light: hitl_sim_stub::camera::LightLevel,
 }
 
 #[cfg(feature = "stub")]
-fn start_stub(faults: &[String], lab: &LabConfig) -> Result<EmbeddedStub, RunError> {
-    use hitl_sim_stub::{mujoco_plant::MujocoPlant, Fault, Stub, StubConfig};
+fn start_stub(faults: &[String], lab: &LabConfig, target: &TargetScene) -> Result<EmbeddedStub, RunError> {
+    use hitl_sim_stub::mjcf::TargetModel as StubTarget;
+    use hitl_sim_stub::mujoco_plant::{LabModel, MujocoPlant};
+    use hitl_sim_stub::{Fault, Stub, StubConfig};
     let faults = faults
         .iter()
         .map(|s| s.parse::<Fault>().map_err(|e| RunError::BadInput(e.to_string())))
         .collect::<Result<Vec<_>, _>>()?;
-    let plant = MujocoPlant::new(lab, None).map_err(|e| RunError::Device(format!("stub: {e}")))?;
+    let stub_target = StubTarget {
+        mesh: Some(target.model.vertices_faces()),
+        greatest_dimension_m: target.model.greatest_dimension_m() * target.scale,
+    };
+    let lab_model = LabModel::generated(lab, &stub_target)
+        .map_err(|e| RunError::Device(format!("stub scene: {e}")))?;
+    let plant = MujocoPlant::from_lab_model(lab_model.clone());
+    let arm = plant.shared_state();
     let config = StubConfig { faults, ..StubConfig::ephemeral() };
-    let handle =
-        Stub::start(config, Box::new(plant)).map_err(|e| RunError::Device(format!("stub: {e}")))?;
-    Ok(EmbeddedStub { handle })
+    let handle = Stub::start(config, Box::new(plant))
+        .map_err(|e| RunError::Device(format!("stub: {e}")))?;
+    Ok(EmbeddedStub { handle, lab_model, arm, light: Default::default() })
+}
+
+/// The target the camera looks at: its model and the lab scale (lab metres per real metre).
+struct TargetScene {
+    model: hitl_perception::TargetModel,
+    scale: f64,
+}
+
+/// The target model and the scale the trajectory was planned at (its `meta.scale`); without one,
+/// the model is sized to the lab's target keep-out (or the printed model's size).
+fn target_scene(req: &RunRequest, traj: &Trajectory) -> Result<TargetScene, RunError> {
+    let model = hitl_perception::TargetModel::from_spec(&req.target_model)
+        .map_err(|e| RunError::BadInput(format!("--target-model: {e}")))?;
+    let planned = traj
+        .meta
+        .as_deref()
+        .and_then(|m| serde_json::from_str::<serde_json::Value>(m).ok())
+        .and_then(|v| v.get("scale")?.as_f64())
+        .filter(|s| *s > 0.0 && s.is_finite());
+    let lab_size = req
+        .lab
+        .target
+        .model_size_m
+        .unwrap_or(2.0 * req.lab.target.keepout_radius_m);
+    let scale = planned.unwrap_or(lab_size / model.greatest_dimension_m());
+    Ok(TargetScene { model, scale })
+}
+
+/// A perception pose (4x4 matrix) as the recorder's pose.
+fn record_pose(m: &nalgebra::Matrix4<f64>) -> hitl_record::Pose {
+    let rows: [[f64; 4]; 4] = std::array::from_fn(|i| std::array::from_fn(|j| m[(i, j)]));
+    hitl_record::Pose::from_matrix(&rows)
+}
+
+/// The run's devices besides the arm, opened before anything moves.
+struct RunDevices {
+    camera: RunCamera,
+    light: RunLight,
+    inputs: RunInputs,
+}
+
+/// Open camera, light and inputs as asked; a device that cannot be opened fails the run (exit 5)
+/// before the arm is enabled.
+fn open_devices(
+    req: &RunRequest,
+    #[cfg(feature = "stub")] stub: Option<&EmbeddedStub>,
+    clock: MonotonicClock,
+) -> Result<RunDevices, RunError> {
+    let spec: LightSpec = req.light.parse().map_err(|e: hitl_drivers::light::spec::LightSpecError| RunError::BadInput(e.to_string()))?;
+    #[cfg(feature = "stub")]
+    let sim_needed = |what: &str| -> Result<&EmbeddedStub, RunError> {
+        stub.ok_or_else(|| RunError::BadInput(format!("--{what} sim needs the embedded stub (no --arm)")))
+    };
+    let light = match &spec {
+        LightSpec::None => RunLight::None(NoLight),
+        #[cfg(feature = "stub")]
+        LightSpec::Sim => RunLight::Sim(SimLight(sim_needed("light")?.light.clone())),
+        #[cfg(not(feature = "stub"))]
+        LightSpec::Sim => return Err(RunError::BadInput("--light sim needs the stub feature".into())),
+        other => {
+            let rt = tokio::runtime::Builder::new_current_thread()
+                .enable_all()
+                .build()
+                .map_err(|e| RunError::Device(format!("light: {e}")))?;
+            let light = rt
+                .block_on(SerialLight::open(other, clock))
+                .map_err(|e| RunError::Device(format!("light {other}: {e}")))?;
+            match light {
+                Some(l) => RunLight::Serial(l),
+                None => RunLight::None(NoLight),
+            }
+        }
+    };
+    let camera = match req.camera.as_str() {
+        "none" => RunCamera::None(NoCamera),
+        #[cfg(feature = "stub")]
+        "sim" => {
+            use hitl_sim_stub::camera::{Preset, SimCamera, SimCameraConfig};
+            let s = sim_needed("camera")?;
+            let preset = Preset::from_name(&req.camera_preset).ok_or_else(|| {
+                RunError::BadInput(format!("--camera-preset {}: expected nfov, wfov or orbbec", req.camera_preset))
+            })?;
+            let intrinsics = match req.camera_size {
+                Some((w, h)) => preset.at(w, h),
+                None => preset.intrinsics(),
+            };
+            let config = SimCameraConfig { intrinsics, clock, ..Default::default() };
+            let mut cam = SimCamera::new(s.lab_model.clone(), s.arm.clone(), s.light.clone(), config)
+                .map_err(|e| RunError::Device(e.to_string()))?;
+            cam.arm_trigger().map_err(|e| RunError::Device(e.to_string()))?;
+            RunCamera::Sim(Box::new(cam))
+        }
+        "orbbec" => {
+            use hitl_drivers::orbbec::{OrbbecCamera, OrbbecOptions};
+            let mut cam = OrbbecCamera::open(OrbbecOptions { clock, ..Default::default() })
+                .map_err(|e| RunError::Device(e.to_string()))?;
+            cam.arm_trigger().map_err(|e| RunError::Device(format!("Orbbec camera: {e}")))?;
+            RunCamera::Orbbec(Box::new(cam))
+        }
+        other => {
+            return Err(RunError::BadInput(format!("--camera {other}: expected sim, orbbec or none")))
+        }
+    };
+    #[cfg(feature = "stub")]
+    let inputs = match stub {
+        Some(s) => RunInputs::Sim(s.handle.inputs()),
+        None => RunInputs::None(NoInputs),
+    };
+    #[cfg(not(feature = "stub"))]
+    let inputs = RunInputs::None(NoInputs);
+    Ok(RunDevices { camera, light, inputs })
+}
+
+/// Start the recorder, when asked: the `run` metadata record first.
+fn start_recorder(
+    req: &RunRequest,
+    traj: &Trajectory,
+    scale: f64,
+) -> Result<Option<(RecorderHandle, Telemetry)>, RunError> {
+    let Some(path) = &req.record else { return Ok(None) };
+    if let Some(dir) = path.parent().filter(|d| !d.as_os_str().is_empty()) {
+        std::fs::create_dir_all(dir)
+            .map_err(|e| RunError::BadInput(format!("cannot create {}: {e}", dir.display())))?;
+    }
+    let bytes = std::fs::read(&req.trajectory).unwrap_or_default();
+    let sha = sha2::Sha256::digest(&bytes);
+    let mut versions = std::collections::BTreeMap::new();
+    versions.insert("hitl".to_string(), env!("CARGO_PKG_VERSION").to_string());
+    let meta = RunMetadata {
+        config: serde_json::json!({
+            "trajectory": req.trajectory.display().to_string(),
+            "rate_hz": req.rate_hz,
+            "speed_scale": req.speed_scale,
+            "camera": req.camera,
+            "light": req.light,
+            "perception": req.perception,
+            "target_model": req.target_model,
+            "arm": match &req.target { ArmTarget::Stub { faults } => format!("stub (faults: {faults:?})"), ArmTarget::Remote { host } => host.clone() },
+        })
+        .to_string(),
+        trajectory_sha256: sha.iter().map(|b| format!("{b:02x}")).collect(),
+        trajectory_meta: traj.meta.clone().unwrap_or_default(),
+        lab_config: req.lab.to_toml(),
+        versions,
+        scale: Some(scale),
+        extra: Default::default(),
+        sun_phase: traj.sun_phase_deg.as_ref().map(|deg| SunPhaseTrack {
+            t_s: traj.t.iter().map(|t| t / req.speed_scale).collect(),
+            sun_phase_deg: deg.clone(),
+        }),
+    };
+    Recorder::spawn(path, &meta)
+        .map(Some)
+        .map_err(|e| RunError::BadInput(format!("cannot record to {}: {e}", path.display())))
 }
 
 /// Play `req` and say how it ended.
 pub fn run(req: RunRequest) -> Result<RunReport, RunError> {
-    let (_traj, table) = prepare(&req)?;
-    if req.camera != "none" && req.camera != "sim" {
-        return Err(RunError::BadInput(format!(
-            "--camera {}: not available in this build",
-            req.camera
-        )));
-    }
-    if req.light != "none" && req.light != "sim" {
-        return Err(RunError::BadInput(format!(
-            "--light {}: not available in this build",
-            req.light
-        )));
-    }
+    let (traj, table) = prepare(&req)?;
+    let scene = target_scene(&req, &traj)?;
+    let backend: BackendSpec = req
+        .perception
+        .parse()
+        .map_err(|e: hitl_perception::PerceptionError| RunError::BadInput(format!("--perception: {e}")))?;
+    let clock = MonotonicClock::new();
 
     // The arm: the embedded stub, or the real box.
     #[cfg(feature = "stub")]
-    let mut stub = None;
+    let stub = match &req.target {
+        ArmTarget::Stub { faults } => Some(start_stub(faults, &req.lab, &scene)?),
+        ArmTarget::Remote { .. } => None,
+    };
     let (cmd_addr, report_host) = match &req.target {
         #[cfg(feature = "stub")]
-        ArmTarget::Stub { faults } => {
-            let s = start_stub(faults, &req.lab)?;
-            let addr = s.handle.cmd_addr();
-            stub = Some(s);
+        ArmTarget::Stub { .. } => {
+            let addr = stub.as_ref().map(|s| s.handle.cmd_addr()).ok_or_else(|| RunError::Device("stub did not start".into()))?;
             (addr, addr.ip())
         }
         #[cfg(not(feature = "stub"))]
         ArmTarget::Stub { .. } => {
-            return Err(RunError::BadInput(
-                "this build has no embedded stub: pass --arm HOST".into(),
-            ))
+            return Err(RunError::BadInput("this build has no embedded stub: pass --arm HOST".into()))
         }
         ArmTarget::Remote { host } => {
             let addr = resolve(host, hitl_drivers::xarm::COMMAND_PORT)?;
@@ -316,7 +511,60 @@ pub fn run(req: RunRequest) -> Result<RunReport, RunError> {
         }
         kind.default_port()
     };
-    let clock = MonotonicClock::new();
+
+    // Devices, recorder and perception, all before the arm is enabled.
+    let devices = open_devices(
+        &req,
+        #[cfg(feature = "stub")]
+        stub.as_ref(),
+        clock,
+    )?;
+    let runtime = tokio::runtime::Builder::new_multi_thread()
+        .worker_threads(1)
+        .enable_all()
+        .build()
+        .map_err(|e| RunError::Device(format!("async runtime: {e}")))?;
+    let recorder = start_recorder(&req, &traj, scene.scale)?;
+    let record_telemetry = recorder.as_ref().map(|(_, t)| t.clone());
+    let (perception, estimates) = match &backend {
+        BackendSpec::None => (None, None),
+        spec => {
+            let mesh = scene.model.lab_mesh(scene.scale).map_err(|e| RunError::BadInput(e.to_string()))?;
+            let estimator = backend_from_spec(spec, &mesh)
+                .map_err(|e| RunError::BadInput(format!("--perception: {e}")))?;
+            match estimator {
+                None => (None, None),
+                Some(est) => {
+                    let _guard = runtime.enter();
+                    let (handle, mut results, _task) =
+                        spawn_worker(est, 4, 64, ReregisterPolicy::default());
+                    let sink = record_telemetry.clone();
+                    let forward = runtime.spawn(async move {
+                        let mut n = 0u64;
+                        while let Some(r) = results.recv().await {
+                            if let (Ok(est), Some(sink)) = (&r.estimate, &sink) {
+                                if let Some(m) = est.pose {
+                                    sink.push_pose_estimate(&PoseStamped { capture_ns: r.timestamp_ns, pose: record_pose(&m) });
+                                }
+                            }
+                            n += 1;
+                        }
+                        n
+                    });
+                    (Some(handle), Some(forward))
+                }
+            }
+        }
+    };
+    let intake_queues = Arc::new(IntakeQueues::new());
+    let intake = Intake::spawn(
+        Arc::clone(&intake_queues),
+        LabFrames::new(&req.lab),
+        IntakeOutputs { record: record_telemetry.clone(), perception: perception.clone() },
+    )
+    .map_err(|e| RunError::Device(format!("capture intake thread: {e}")))?;
+
+    // Connect and enable the arm.
     let mut arm = XarmClient::connect(cmd_addr, ClientConfig::default())
         .map_err(|e| RunError::Device(format!("arm at {cmd_addr}: {e}")))?;
     let reader = connect_reports(
@@ -331,7 +579,6 @@ pub fn run(req: RunRequest) -> Result<RunReport, RunError> {
         .map_err(|e| RunError::Device(format!("report reader thread: {e}")))?;
     let first = first_report(&mut reports, Duration::from_secs(2))
         .ok_or_else(|| RunError::Device("the arm sent no report within 2 s".into()))?;
-
     arm.enable_servo().map_err(|e| RunError::Device(format!("enabling the arm: {e}")))?;
     let approach = plan_approach(&first.q, &table, &req.lab)?;
     let program = Program {
@@ -352,7 +599,10 @@ pub fn run(req: RunRequest) -> Result<RunReport, RunError> {
         approach,
     };
 
-    let health = Health::default();
+    let health = Health {
+        recorder: recorder.as_ref().map(|(h, _)| h.health()),
+        ..Health::default()
+    };
     let status = Arc::new(LoopStatus::default());
     let limits = &req.lab.limits;
     let stop_limits = MoveLimits {
@@ -364,35 +614,31 @@ pub fn run(req: RunRequest) -> Result<RunReport, RunError> {
         .map_err(|e| RunError::Device(format!("stop planner thread: {e}")))?;
     let interlocks = Interlocks::new(Thresholds::from_lab(&req.lab));
     install_ctrlc(&health);
-
-    #[cfg(feature = "stub")]
-    let inputs = match &stub {
-        Some(s) => RunInputs::Sim(s.handle.inputs()),
-        None => RunInputs::None(NoInputs),
-    };
-    #[cfg(not(feature = "stub"))]
-    let inputs = RunInputs::None(NoInputs);
     let io = LoopIo {
         reports,
-        telemetry: NoTelemetry,
+        telemetry: RunTelemetry { record: record_telemetry.clone(), intake: Arc::clone(&intake_queues) },
         status: Arc::clone(&status),
         health,
         stop,
         clock,
     };
+    let RunDevices { camera, light, inputs } = devices;
+    let late_frames = Arc::clone(&intake_queues);
     let rt_options = req.rt;
     let rate = table.rate_hz;
     let start_q = first.q;
+    let status_rt = Arc::clone(&status);
     let (outcome, rt_report) = std::thread::scope(|scope| {
         let program = &program;
         let rt_thread = std::thread::Builder::new()
             .name("hitl-rt".into())
             .spawn_scoped(scope, move || {
                 let rt_report = rt::os::apply(&rt_options);
-                let devices = Devices { arm, camera: NoCamera, light: NoLight, inputs };
+                let devices = Devices { arm, camera, light, inputs };
                 let control = ControlLoop::new(program, devices, io, interlocks, rate, &start_q);
                 let (outcome, mut devices) = control.run(rt_options.spin);
                 let _ = devices.arm.flush_servo_replies();
+                collect_late_frames(&mut devices.camera, &late_frames, captures_fired(&status_rt));
                 (outcome, rt_report)
             })
             .map_err(|e| RunError::Device(format!("real-time thread: {e}")))?;
@@ -403,6 +649,30 @@ pub fn run(req: RunRequest) -> Result<RunReport, RunError> {
     reader_stop.store(true, Ordering::Release);
     let _ = reader_thread.join();
 
+    // Let the last frames arrive, then close the capture path and the recording.
+    std::thread::sleep(Duration::from_millis(300));
+    let intake_stats = intake.finish();
+    if let Some(p) = &perception {
+        p.close();
+    }
+    let estimates_forwarded = estimates.and_then(|f| runtime.block_on(f).ok()).unwrap_or(0);
+    if let (Outcome::Tripped { trip, stopped }, Some(t)) = (&outcome, &record_telemetry) {
+        t.push_event(SafetyEventMsg::text(
+            trip.t_ns,
+            if *stopped { EventKind::StopDone } else { EventKind::Other },
+            format!(
+                "{}: {}; {}",
+                trip.kind.name(),
+                trip.kind.detail(),
+                if *stopped { "controlled stop completed" } else { "arm told to hold" }
+            ),
+        ));
+    }
+    let record_summary = match recorder {
+        Some((handle, _)) => Some(handle.finish().map_err(|e| e.to_string())),
+        None => None,
+    };
+
     #[cfg(feature = "stub")]
     let stub_final_q = stub.map(|s| {
         let q = s.handle.plant_joints();
@@ -412,10 +682,14 @@ pub fn run(req: RunRequest) -> Result<RunReport, RunError> {
     #[cfg(not(feature = "stub"))]
     let stub_final_q = None;
 
-    let exit_code = match outcome {
+    let mut exit_code = match outcome {
         Outcome::Completed { .. } => exit::OK,
         Outcome::Tripped { trip, .. } => trip.kind.exit_code(),
     };
+    let recording_failed = matches!(record_summary, Some(Err(_)));
+    if exit_code == exit::OK && recording_failed {
+        exit_code = exit::INTERLOCK;
+    }
     for line in &rt_report.fallbacks {
         eprintln!("note: {line}");
     }
@@ -430,7 +704,38 @@ pub fn run(req: RunRequest) -> Result<RunReport, RunError> {
         rt: rt_report,
         stub_final_q,
         recording: req.record.clone(),
+        intake: intake_stats,
+        estimates: estimates_forwarded,
+        record_error: record_summary.and_then(|r| r.err()),
     })
+}
+
+fn captures_fired(status: &LoopStatus) -> u64 {
+    status.captures.load(Ordering::Acquire)
+}
+
+/// After the loop: frames for the last captures may still be on their way; hand them to the
+/// intake (up to 2 s), so every capture is recorded or reported.
+fn collect_late_frames(camera: &mut RunCamera, intake: &IntakeQueues, fired: u64) {
+    let deadline = Instant::now() + Duration::from_secs(2);
+    while Instant::now() < deadline {
+        match camera.poll_frame() {
+            Ok(Some(frame)) => {
+                intake.frames_in.fetch_add(1, Ordering::Relaxed);
+                if intake.frames.push(frame).is_err() {
+                    intake.frames_lost.fetch_add(1, Ordering::Relaxed);
+                }
+            }
+            Ok(None) => {
+                let delivered = intake.frames_in.load(Ordering::Relaxed);
+                if matches!(camera, RunCamera::None(_)) || delivered >= fired {
+                    break;
+                }
+                std::thread::sleep(Duration::from_millis(5));
+            }
+            Err(_) => break,
+        }
+    }
 }
 
 fn connect_reports(

@@ -6,7 +6,7 @@
 
 use super::interlocks::Trip;
 use super::setpoint::{Phase, Setpoint};
-use hitl_hal::ArmState;
+use hitl_hal::{ArmState, RgbdFrame};
 use std::sync::atomic::{AtomicBool, AtomicU64, AtomicU8, Ordering};
 
 /// `/arm/setpoint`.
@@ -22,6 +22,7 @@ pub struct SetpointOut {
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub struct TimingOut {
     pub tick: u64,
+    pub t_ns: u64,
     pub wake_late_ns: u64,
     pub tick_ns: u64,
     pub overrun: bool,
@@ -47,6 +48,8 @@ pub trait TelemetrySink {
     fn light(&self, t_ns: u64, level: f32);
     fn capture(&self, c: &CaptureOut);
     fn trip(&self, trip: &Trip);
+    /// A frame the camera delivered: moved on (never copied) to the capture intake.
+    fn frame(&self, frame: RgbdFrame);
 }
 
 /// A sink that keeps nothing (runs without a recording still count ticks in [`LoopStatus`]).
@@ -60,6 +63,7 @@ impl TelemetrySink for NoTelemetry {
     fn light(&self, _: u64, _: f32) {}
     fn capture(&self, _: &CaptureOut) {}
     fn trip(&self, _: &Trip) {}
+    fn frame(&self, _: RgbdFrame) {}
 }
 
 /// Live status of the loop for the progress line (atomics; written by the tick).

@@ -53,8 +53,10 @@ impl Program {
 pub struct Health {
     /// Ctrl-C.
     pub operator_stop: Arc<AtomicBool>,
-    /// The recorder cannot write.
+    /// The recorder cannot write (raised by hand, e.g. in tests).
     pub recorder_failed: Arc<AtomicBool>,
+    /// The recorder's own health flag, when the run records.
+    pub recorder: Option<hitl_record::RecorderHealth>,
     /// A device failed outside the tick (frame intake, serial task): 0 none, else `Device` + 1.
     pub device_failed: Arc<AtomicU8>,
 }
@@ -213,7 +215,8 @@ where
                 commanded: &self.last_sent.q,
                 inputs,
                 operator_stop: self.health.operator_stop.load(Ordering::Relaxed),
-                recorder_failed: self.health.recorder_failed.load(Ordering::Relaxed),
+                recorder_failed: self.health.recorder_failed.load(Ordering::Relaxed)
+                    || self.health.recorder.as_ref().is_some_and(|r| r.is_failed()),
                 device_failed: self.device_failed.or_else(|| self.health.failed_device()),
                 check_deviation: true,
             };
@@ -248,11 +251,21 @@ where
             self.schedule_light_and_capture(k, now, &setpoint);
         }
 
-        // 6. Telemetry and status.
+        // 6. Frames the camera has delivered go on to the capture intake.
+        match self.devices.camera.poll_frame() {
+            Ok(Some(frame)) => self.telemetry.frame(frame),
+            Ok(None) => {}
+            Err(_) => {
+                self.device_failed.get_or_insert(Device::Camera);
+            }
+        }
+
+        // 7. Telemetry and status.
         self.telemetry.setpoint(&SetpointOut { tick: k, t_ns: now, phase, setpoint });
         let tick_ns = self.clock.now_ns().saturating_sub(now);
         self.telemetry.timing(&TimingOut {
             tick: k,
+            t_ns: now,
             wake_late_ns: wake.late_ns,
             tick_ns,
             overrun: wake.overrun,

@@ -1,0 +1,192 @@
+//! The capture intake thread: every frame the camera delivers is matched to its capture (the tick
+//! that fired it), to the arm's joints at exposure (interpolated from the report stream) and to
+//! ground truth; then recorded (images, calibration, `/tf`, `/pose/gt`) and handed to perception.
+//! It also measures the sync error: exposure time minus the tick's trigger time.
+
+use super::history::StateHistory;
+use super::sink::IntakeQueues;
+use super::truth::{pose, LabFrames};
+use crate::control::telemetry::CaptureOut;
+use hitl_hal::RgbdFrame;
+use hitl_perception::{PerceptionFrame, WorkerHandle};
+use hitl_record::{EventKind, FrameRecord, SafetyEventMsg, Telemetry};
+use std::collections::VecDeque;
+use std::sync::atomic::{AtomicBool, Ordering};
+use std::sync::Arc;
+use std::thread::JoinHandle;
+use std::time::Duration;
+
+/// What the intake saw over a run.
+#[derive(Debug, Clone, Default, PartialEq, serde::Serialize)]
+pub struct IntakeStats {
+    /// Frames that arrived.
+    pub frames: u64,
+    /// Frames recorded (handed to the recorder's frame queue).
+    pub recorded: u64,
+    /// Frames that could not be recorded or were lost before the intake (each is an event).
+    pub not_recorded: u64,
+    /// Frames handed to perception.
+    pub to_perception: u64,
+    /// Exposure minus trigger, nanoseconds: mean and largest magnitude.
+    pub sync_error_mean_ns: f64,
+    pub sync_error_max_ns: u64,
+}
+
+/// Where frames go after the intake.
+pub struct IntakeOutputs {
+    pub record: Option<Telemetry>,
+    pub perception: Option<WorkerHandle>,
+}
+
+/// The running intake; `finish` drains what is left and returns the statistics.
+pub struct Intake {
+    stop: Arc<AtomicBool>,
+    thread: Option<JoinHandle<IntakeStats>>,
+}
+
+impl Intake {
+    pub fn spawn(
+        queues: Arc<IntakeQueues>,
+        frames: LabFrames,
+        out: IntakeOutputs,
+    ) -> std::io::Result<Self> {
+        let stop = Arc::new(AtomicBool::new(false));
+        let stop_flag = Arc::clone(&stop);
+        let thread = std::thread::Builder::new()
+            .name("hitl-capture-intake".into())
+            .spawn(move || Worker::new(queues, frames, out).run(&stop_flag))?;
+        Ok(Self { stop, thread: Some(thread) })
+    }
+
+    /// Process what is still queued, stop, and report.
+    pub fn finish(mut self) -> IntakeStats {
+        self.stop.store(true, Ordering::Release);
+        self.thread.take().and_then(|t| t.join().ok()).unwrap_or_default()
+    }
+}
+
+impl Drop for Intake {
+    fn drop(&mut self) {
+        self.stop.store(true, Ordering::Release);
+        if let Some(t) = self.thread.take() {
+            let _ = t.join();
+        }
+    }
+}
+
+struct Worker {
+    queues: Arc<IntakeQueues>,
+    frames: LabFrames,
+    out: IntakeOutputs,
+    history: StateHistory,
+    captures: VecDeque<CaptureOut>,
+    stats: IntakeStats,
+    sync_sum_ns: f64,
+    lost_seen: u64,
+}
+
+impl Worker {
+    fn new(queues: Arc<IntakeQueues>, frames: LabFrames, out: IntakeOutputs) -> Self {
+        Self {
+            queues,
+            frames,
+            out,
+            history: StateHistory::new(4096),
+            captures: VecDeque::new(),
+            stats: IntakeStats::default(),
+            sync_sum_ns: 0.0,
+            lost_seen: 0,
+        }
+    }
+
+    fn run(mut self, stop: &AtomicBool) -> IntakeStats {
+        loop {
+            let stopping = stop.load(Ordering::Acquire);
+            let worked = self.drain();
+            if stopping && !worked {
+                break;
+            }
+            if !worked {
+                std::thread::sleep(Duration::from_millis(2));
+            }
+        }
+        self.stats
+    }
+
+    /// One pass over the queues; whether anything was there.
+    fn drain(&mut self) -> bool {
+        let mut worked = false;
+        while let Some(state) = self.queues.states.pop() {
+            self.history.push(state);
+            worked = true;
+        }
+        while let Some(capture) = self.queues.captures.pop() {
+            if self.captures.len() == 1024 {
+                self.captures.pop_front();
+            }
+            self.captures.push_back(capture);
+            worked = true;
+        }
+        let lost = self.queues.frames_lost.load(Ordering::Relaxed);
+        for _ in self.lost_seen..lost {
+            self.not_recorded(0, 0, "a frame arrived while the capture intake was full");
+        }
+        self.lost_seen = lost;
+        while let Some(frame) = self.queues.frames.pop() {
+            // The capture record follows the frame's tick; give a late one a moment.
+            self.handle(frame);
+            worked = true;
+        }
+        worked
+    }
+
+    fn not_recorded(&mut self, t_ns: u64, tick: u64, why: &str) {
+        self.stats.not_recorded += 1;
+        if let Some(r) = &self.out.record {
+            r.push_event(SafetyEventMsg::text(
+                t_ns,
+                EventKind::CaptureNotRecorded,
+                format!("capture at tick {tick} not recorded: {why}"),
+            ));
+        }
+    }
+
+    fn handle(&mut self, frame: RgbdFrame) {
+        self.stats.frames += 1;
+        let request = frame.request;
+        let capture = self.captures.iter().find(|c| c.tick == request.tick).copied();
+        let sync_ns = frame.exposure_ns as i64 - request.fired_ns as i64;
+        self.sync_sum_ns += sync_ns as f64;
+        self.stats.sync_error_max_ns = self.stats.sync_error_max_ns.max(sync_ns.unsigned_abs());
+        self.stats.sync_error_mean_ns = self.sync_sum_ns / self.stats.frames as f64;
+
+        let q = self
+            .history
+            .joints_at(frame.exposure_ns)
+            .or(capture.map(|c| c.commanded.q))
+            .unwrap_or([0.0; 7]);
+        let gt = self.frames.target_in_camera(&q);
+
+        if let Some(worker) = &self.out.perception {
+            worker.push(PerceptionFrame {
+                timestamp_ns: frame.exposure_ns,
+                seq: request.tick,
+                intrinsics: frame.intrinsics,
+                color: frame.color.clone(),
+                depth_m: frame.depth_m.clone(),
+                mask: frame.mask.clone(),
+            });
+            self.stats.to_perception += 1;
+        }
+        if let Some(record) = &self.out.record {
+            let mut rec = FrameRecord::from_rgbd(frame);
+            rec.gt_pose = Some(pose(&gt));
+            rec.tf = Some(self.frames.tf(rec.capture_ns, &q));
+            if record.push_frame(rec) {
+                self.stats.recorded += 1;
+            } else {
+                self.stats.not_recorded += 1;
+            }
+        }
+    }
+}

@@ -1,0 +1,135 @@
+//! The tick's telemetry sink for a run: recorder queues (when recording) and the capture intake's
+//! queues. Every method is a lock-free push that never blocks or allocates; full queues drop and
+//! count (the recorder's telemetry drops its oldest, frames are counted as lost and reported).
+
+use crate::control::interlocks::{Trip, TripKind};
+use crate::control::setpoint::Phase;
+use crate::control::telemetry::{CaptureOut, SetpointOut, TelemetrySink, TimingOut};
+use crossbeam::queue::ArrayQueue;
+use hitl_hal::{ArmState, RgbdFrame};
+use hitl_record::{
+    ArmStateMsg, EventKind, LightMsg, Phase as RecPhase, SafetyEventMsg, SetpointMsg, Telemetry,
+    TimingMsg,
+};
+use std::sync::atomic::{AtomicU64, Ordering};
+use std::sync::Arc;
+
+/// Queues from the tick to the capture intake.
+#[derive(Debug)]
+pub struct IntakeQueues {
+    pub frames: ArrayQueue<RgbdFrame>,
+    pub states: ArrayQueue<ArmState>,
+    pub captures: ArrayQueue<CaptureOut>,
+    /// Frames handed over by the camera (queued or lost).
+    pub frames_in: AtomicU64,
+    /// Frames that found the intake queue full.
+    pub frames_lost: AtomicU64,
+}
+
+impl IntakeQueues {
+    pub fn new() -> Self {
+        Self {
+            frames: ArrayQueue::new(16),
+            states: ArrayQueue::new(4096),
+            captures: ArrayQueue::new(256),
+            frames_in: AtomicU64::new(0),
+            frames_lost: AtomicU64::new(0),
+        }
+    }
+}
+
+impl Default for IntakeQueues {
+    fn default() -> Self {
+        Self::new()
+    }
+}
+
+/// The sink a run's tick writes to.
+pub struct RunTelemetry {
+    pub record: Option<Telemetry>,
+    pub intake: Arc<IntakeQueues>,
+}
+
+fn phase(p: Phase) -> RecPhase {
+    match p {
+        Phase::Approach => RecPhase::Approach,
+        // Settling holds the last waypoint: it is the end of playback on the contract's topic.
+        Phase::Playback | Phase::Settle => RecPhase::Playback,
+        Phase::Stop => RecPhase::Stop,
+    }
+}
+
+/// The recorder's event for a trip, with its numbers (no text: the tick cannot format).
+fn trip_event(trip: &Trip) -> SafetyEventMsg {
+    let (kind, joint, value, limit) = match trip.kind {
+        TripKind::ReportWatchdog { silent_ms } => (EventKind::ReportWatchdog, None, silent_ms, 0.0),
+        TripKind::ConnectionLost => (EventKind::DeviceFault, None, 0.0, 0.0),
+        TripKind::ArmError { code } => (EventKind::ArmError, None, f64::from(code), 0.0),
+        TripKind::ArmWarning { code } => (EventKind::ArmWarning, None, f64::from(code), 0.0),
+        TripKind::Deviation { joint, deviation_rad } => {
+            (EventKind::Deviation, Some(joint as u8 + 1), deviation_rad, 0.0)
+        }
+        TripKind::EStop => (EventKind::EStop, None, 1.0, 0.0),
+        TripKind::DoorOpen => (EventKind::DoorOpen, None, 1.0, 0.0),
+        TripKind::OperatorStop => (EventKind::OperatorStop, None, 1.0, 0.0),
+        TripKind::RecorderFailed => (EventKind::RecorderFailed, None, 1.0, 0.0),
+        TripKind::DeviceFailed { device } => (EventKind::DeviceFault, None, device as u8 as f64, 0.0),
+    };
+    SafetyEventMsg::numeric(trip.t_ns, kind, trip.tick, joint, value, limit)
+}
+
+impl TelemetrySink for RunTelemetry {
+    fn setpoint(&self, m: &SetpointOut) {
+        if let Some(r) = &self.record {
+            r.push_setpoint(&SetpointMsg {
+                tick: m.tick,
+                t_ns: m.t_ns,
+                phase: phase(m.phase),
+                q: m.setpoint.q,
+                qd: m.setpoint.qd,
+            });
+        }
+    }
+
+    fn timing(&self, m: &TimingOut) {
+        if let Some(r) = &self.record {
+            r.push_timing(&TimingMsg {
+                tick: m.tick,
+                t_ns: m.t_ns,
+                wake_late_ns: m.wake_late_ns as i64,
+                tick_ns: m.tick_ns,
+                overrun: m.overrun,
+            });
+        }
+    }
+
+    fn arm_state(&self, s: &ArmState) {
+        if let Some(r) = &self.record {
+            r.push_state(&ArmStateMsg::from(s));
+        }
+        let _ = self.intake.states.force_push(*s);
+    }
+
+    fn light(&self, t_ns: u64, level: f32) {
+        if let Some(r) = &self.record {
+            r.push_light(&LightMsg { t_ns, level });
+        }
+    }
+
+    fn capture(&self, c: &CaptureOut) {
+        let _ = self.intake.captures.force_push(*c);
+    }
+
+    fn trip(&self, trip: &Trip) {
+        if let Some(r) = &self.record {
+            r.push_event(trip_event(trip));
+        }
+    }
+
+    fn frame(&self, frame: RgbdFrame) {
+        self.intake.frames_in.fetch_add(1, Ordering::Relaxed);
+        if self.intake.frames.push(frame).is_err() {
+            self.intake.frames_lost.fetch_add(1, Ordering::Relaxed);
+        }
+    }
+}
