@@ -187,6 +187,13 @@ impl LabModel {
     }
 }
 
+/// Largest joint angle a command may carry, radians; anything beyond is garbage, not a pose.
+pub const ABSURD_ANGLE_RAD: f64 = 100.0;
+
+fn sane(q: &Joints) -> bool {
+    q.iter().all(|v| v.is_finite() && v.abs() <= ABSURD_ANGLE_RAD)
+}
+
 /// The MuJoCo plant behind the stub's protocol server.
 pub struct MujocoPlant {
     lab: LabModel,
@@ -196,6 +203,8 @@ pub struct MujocoPlant {
     timestep: f64,
     limits: [(f64, f64); DOF],
     shared: SharedArmState,
+    /// MuJoCo reset the state after a numerical instability (bad position/velocity/acceleration).
+    diverged: bool,
 }
 
 impl std::fmt::Debug for MujocoPlant {
@@ -227,6 +236,7 @@ impl MujocoPlant {
             timestep,
             limits,
             shared: SharedArmState::default(),
+            diverged: false,
         };
         plant.reset(&[0.0; DOF]);
         plant
@@ -259,6 +269,13 @@ impl MujocoPlant {
         (0..DOF)
             .find(|&j| q[j] <= self.limits[j].0 + tol || q[j] >= self.limits[j].1 - tol)
             .map(|j| (j, q[j]))
+    }
+
+    /// True once MuJoCo has had to reset the simulation after a numerical instability (it puts
+    /// the arm back at its model pose when positions, velocities or accelerations blow up). The
+    /// server should treat it as an arm fault. Cleared by [`Plant::reset`].
+    pub fn diverged(&self) -> bool {
+        self.diverged
     }
 
     /// Every current contact between the arm and the scene (arm part first).
@@ -304,10 +321,11 @@ impl Plant for MujocoPlant {
         std::array::from_fn(|j| qvel[self.lab.dof_adr[j]])
     }
 
-    /// Sets the servo targets. A command with a NaN or infinite value is ignored (the box refuses
-    /// it too); the previous targets stay.
+    /// Sets the servo targets. A command with a NaN, infinite or absurd (beyond
+    /// [`ABSURD_ANGLE_RAD`]) value is ignored (the box refuses it too); the previous targets stay.
+    /// Targets beyond a joint limit are taken: the joint stops on its limit.
     fn command(&mut self, q: &Joints) {
-        if q.iter().any(|v| !v.is_finite()) {
+        if !sane(q) {
             return;
         }
         let ctrl = self.data.ctrl_mut();
@@ -317,7 +335,8 @@ impl Plant for MujocoPlant {
     }
 
     fn reset(&mut self, q: &Joints) {
-        let q = if q.iter().all(|v| v.is_finite()) { *q } else { [0.0; DOF] };
+        let q = if sane(q) { *q } else { [0.0; DOF] };
+        self.diverged = false;
         let goal = self.goal_time;
         self.data.reset();
         // Keep the clock running across resets: the server's time base must not jump back.
@@ -339,7 +358,14 @@ impl Plant for MujocoPlant {
         }
         self.goal_time += dt;
         while self.data.time() < self.goal_time - 0.5 * self.timestep {
+            let before = self.data.time();
             self.data.step();
+            if self.data.time() <= before {
+                // MuJoCo reset the data (time back to 0): keep the server's clock, flag the fault.
+                self.diverged = true;
+                self.data.set_time(self.goal_time);
+                break;
+            }
         }
         self.publish();
     }

@@ -110,3 +110,33 @@ fn the_plant_can_move_to_the_server_thread() {
     });
     assert!((handle.join().expect("thread") - 0.02).abs() < 1e-9);
 }
+
+#[test]
+fn a_blown_up_simulation_keeps_its_clock_and_says_so() {
+    let mut plant = MujocoPlant::new(&LabConfig::default(), None).expect("plant");
+    plant.advance(0.1);
+    assert!(!plant.diverged());
+    // Garbage commands are ignored: the targets stay.
+    plant.command(&[1e12; 7]);
+    plant.command(&[f64::NAN; 7]);
+    plant.advance(0.01);
+    assert!(!plant.diverged() && plant.joints().iter().all(|q| q.abs() < 1e-3));
+    // A scene MuJoCo cannot integrate: stiff servos on a 0.5 s timestep, given a step.
+    let xml = generated();
+    let at = xml.find("timestep=\"").expect("timestep") + "timestep=\"".len();
+    let close = at + xml[at..].find('"').expect("quote");
+    let path = write("unstable.xml", &format!("{}0.5{}", &xml[..at], &xml[close..]));
+    let mut plant = MujocoPlant::new(&LabConfig::default(), Some(&path)).expect("scene");
+    plant.advance(0.1);
+    plant.command(&[1.0, 1.0, 1.0, 1.0, 1.0, 1.0, 1.0]);
+    for _ in 0..20 {
+        plant.advance(0.5);
+    }
+    assert!(plant.diverged(), "MuJoCo should have reset the absurd state");
+    let t = plant.time();
+    assert!(t >= 10.1 - 0.5, "time went back to {t}");
+    plant.advance(0.5);
+    assert!(plant.time() > t, "{}", plant.time());
+    plant.reset(&[0.0; 7]);
+    assert!(!plant.diverged());
+}
