@@ -224,3 +224,25 @@ pub fn bench_record(seconds: f64) -> serde_json::Value {
         "numpy_side_by_side": "scripts/bench_record_numpy.py (savez_compressed per depth frame, same frames)",
     })
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// The figures numpy computes for the same frames (scripts/bench_record_numpy.py): the
+    /// side-by-side benchmark writes identical data.
+    #[test]
+    fn synthetic_depth_matches_the_numpy_script() {
+        for (k, sum, centre, corner, holes) in [
+            (0u32, 1_995_612_533u64, 904u16, 0u16, 10_602usize),
+            (1, 1_995_646_436, 903, 2007, 10_566),
+            (5, 1_995_189_896, 911, 2008, 10_816),
+        ] {
+            let d = synthetic_depth_mm(k);
+            assert_eq!(d.iter().map(|v| u64::from(*v)).sum::<u64>(), sum, "frame {k}");
+            assert_eq!(d[(400 * DEPTH_W + 640) as usize], centre);
+            assert_eq!(d[0], corner);
+            assert_eq!(d.iter().filter(|v| **v == 0).count(), holes);
+        }
+    }
+}

@@ -414,3 +414,55 @@ pub fn metres_to_mm(m: f32) -> u16 {
         0
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn close(a: &Pose, b: &Pose) -> bool {
+        a.distance_to(b) < 1e-9 && a.angle_to(b) < 1e-7
+    }
+
+    fn sample() -> Pose {
+        let (s, c) = (0.3f64.sin(), 0.3f64.cos());
+        let n = (0.2f64 * 0.2 + 0.5 * 0.5 + 0.7 * 0.7).sqrt();
+        Pose { translation: [0.1, -0.2, 0.3], rotation: [s * 0.2 / n, s * 0.5 / n, s * 0.7 / n, c] }
+    }
+
+    #[test]
+    fn matrix_round_trip_and_inverse() {
+        let p = sample();
+        assert!(close(&Pose::from_matrix(&p.to_matrix()), &p));
+        assert!(close(&p.compose(&p.inverse()), &Pose::IDENTITY));
+        let x = [0.4, 0.5, -0.6];
+        let back = p.inverse().transform_point(p.transform_point(x));
+        assert!((0..3).all(|i| (back[i] - x[i]).abs() < 1e-12));
+    }
+
+    #[test]
+    fn camera_in_target_frame() {
+        // Flange 1 m in front of the target along base x, camera 0.1 m further along flange z
+        // which points along base x (flange rotated +90 deg about base y).
+        let h = std::f64::consts::FRAC_PI_4;
+        let tf = TfMsg {
+            t_ns: 0,
+            base_flange: Pose {
+                translation: [1.0, 0.0, 0.5],
+                rotation: [0.0, h.sin(), 0.0, h.cos()],
+            },
+            flange_camera: Pose { translation: [0.0, 0.0, 0.1], rotation: [0.0, 0.0, 0.0, 1.0] },
+            base_target: Pose { translation: [2.0, 0.0, 0.5], rotation: [0.0, 0.0, 0.0, 1.0] },
+        };
+        let c = tf.camera_in_target().translation;
+        assert!((c[0] + 0.9).abs() < 1e-12 && c[1].abs() < 1e-12 && c[2].abs() < 1e-12, "{c:?}");
+    }
+
+    #[test]
+    fn millimetres_clamp_bad_depth_to_no_return() {
+        assert_eq!(metres_to_mm(1.2345), 1235);
+        assert_eq!(metres_to_mm(0.0), 0);
+        assert_eq!(metres_to_mm(-1.0), 0);
+        assert_eq!(metres_to_mm(f32::NAN), 0);
+        assert_eq!(metres_to_mm(70.0), 0);
+    }
+}

@@ -186,3 +186,53 @@ impl Telemetry {
         self.q.frames_not_recorded.load(Ordering::Relaxed)
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::msg::{EventDetail, Phase};
+    use hitl_hal::Intrinsics;
+
+    fn sp(tick: u64) -> SetpointMsg {
+        SetpointMsg { tick, t_ns: tick, phase: Phase::Playback, q: [0.0; 7], qd: [0.0; 7] }
+    }
+
+    fn frame(tick: u64) -> FrameRecord {
+        FrameRecord {
+            tick,
+            capture_ns: 1000 + tick,
+            intrinsics: Intrinsics { width: 1, height: 1, fx: 1.0, fy: 1.0, cx: 0.0, cy: 0.0 },
+            color: None,
+            depth: None,
+            mask: None,
+            gt_pose: None,
+            tf: None,
+        }
+    }
+
+    #[test]
+    fn full_telemetry_queue_drops_the_oldest_and_counts() {
+        let t = Telemetry::new(QueueCapacity { telemetry: 4, events: 4, frames: 1 });
+        for k in 0..6 {
+            t.push_setpoint(&sp(k));
+        }
+        assert_eq!(t.total_drops(), 2);
+        assert_eq!(t.drops()[0], (crate::topics::SETPOINT, 2));
+        let kept: Vec<u64> = std::iter::from_fn(|| t.q.setpoint.pop().map(|m| m.tick)).collect();
+        assert_eq!(kept, vec![2, 3, 4, 5]);
+    }
+
+    #[test]
+    fn a_frame_that_cannot_be_queued_becomes_an_event() {
+        let t = Telemetry::new(QueueCapacity { telemetry: 4, events: 4, frames: 1 });
+        assert!(t.push_frame(frame(1)));
+        assert!(!t.frame_queue_has_room());
+        assert!(!t.push_frame(frame(2)));
+        assert_eq!(t.frames_not_recorded(), 1);
+        let ev = t.q.event.pop().expect("event");
+        assert_eq!(ev.kind, EventKind::CaptureNotRecorded);
+        assert_eq!(ev.t_ns, 1002);
+        assert!(matches!(ev.detail, EventDetail::Numeric { tick: 2, .. }));
+        assert_eq!(t.q.frames.pop().map(|f| f.tick), Some(1));
+    }
+}

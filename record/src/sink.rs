@@ -7,8 +7,8 @@
 use crate::error::RecordError;
 use crate::metadata::RunMetadata;
 use crate::msg::{
-    metres_to_mm, ArmStateMsg, DepthImage, EventDetail, FrameRecord, LightMsg, Plane, Pose,
-    PoseStamped, SafetyEventMsg, SetpointMsg, TfMsg, TimingMsg,
+    metres_to_mm, ArmStateMsg, DepthImage, EventDetail, FrameRecord, LightMsg, Pose, PoseStamped,
+    SafetyEventMsg, SetpointMsg, TfMsg, TimingMsg,
 };
 use crate::topics;
 use foxglove::messages as fg;
@@ -312,13 +312,16 @@ impl McapSink {
         self.pose(Ch::PoseEstimate, m)
     }
 
+    /// Encode a RawImage with its pixels written straight into the message buffer (one copy,
+    /// no intermediate byte vector): the small fields first, then the `data` field (tag 6);
+    /// protobuf readers accept fields in any order.
     fn image(
         &mut self,
         ch: Ch,
         t: u64,
         (width, height): (u32, u32),
         (encoding, bytes_per_px): (&str, u32),
-        data: bytes::Bytes,
+        pixels: Pixels<'_>,
     ) -> Result<(), RecordError> {
         let msg = fg::RawImage {
             timestamp: ts(t),
@@ -327,9 +330,22 @@ impl McapSink {
             height,
             encoding: encoding.to_string(),
             step: width.saturating_mul(bytes_per_px),
-            data,
+            data: bytes::Bytes::new(),
         };
-        self.proto(ch, t, &msg)
+        self.buf.clear();
+        msg.encode(&mut self.buf)
+            .map_err(|e| RecordError::Encode(format!("{}: {e}", ch.topic())))?;
+        let len = pixels.byte_len();
+        self.buf.reserve(len + 11);
+        self.buf.push(6 << 3 | 2);
+        let mut v = len as u64;
+        while v >= 0x80 {
+            self.buf.push((v as u8) | 0x80);
+            v >>= 7;
+        }
+        self.buf.push(v as u8);
+        pixels.append_le(&mut self.buf);
+        self.put_buf(ch, t)
     }
 
     /// Write every message of one capture, all stamped with its capture time. Returns a
@@ -360,14 +376,14 @@ impl McapSink {
         }
         if let Some(c) = f.color {
             if c.is_consistent(3) {
-                self.image(Ch::Color, t, (c.width, c.height), ("rgb8", 3), c.data.into())?;
+                self.image(Ch::Color, t, (c.width, c.height), ("rgb8", 3), Pixels::U8(&c.data))?;
             } else {
                 bad.push("color");
             }
         }
         if let Some(m) = f.mask {
             if m.is_consistent(1) {
-                self.image(Ch::Mask, t, (m.width, m.height), ("mono8", 1), m.data.into())?;
+                self.image(Ch::Mask, t, (m.width, m.height), ("mono8", 1), Pixels::U8(&m.data))?;
             } else {
                 bad.push("mask");
             }
@@ -378,8 +394,18 @@ impl McapSink {
                 DepthImage::Millimetres(p) => p.is_consistent(1),
             };
             if ok {
-                let (w, h, enc, bpp, data) = depth_bytes(d, self.depth_output);
-                self.image(Ch::Depth, t, (w, h), (enc, bpp), data)?;
+                let (dims, fmt, px) = match (&d, self.depth_output) {
+                    (DepthImage::Millimetres(p), _) => {
+                        ((p.width, p.height), ("16UC1", 2), Pixels::U16(&p.data))
+                    }
+                    (DepthImage::Metres(p), DepthOutput::Millimetres16) => {
+                        ((p.width, p.height), ("16UC1", 2), Pixels::MetresAsMm(&p.data))
+                    }
+                    (DepthImage::Metres(p), DepthOutput::AsDelivered) => {
+                        ((p.width, p.height), ("32FC1", 4), Pixels::F32(&p.data))
+                    }
+                };
+                self.image(Ch::Depth, t, dims, fmt, px)?;
             } else {
                 bad.push("depth");
             }
@@ -416,29 +442,38 @@ impl McapSink {
     }
 }
 
-fn u16_bytes(v: &[u16]) -> bytes::Bytes {
-    let mut out = Vec::with_capacity(v.len() * 2);
-    for x in v {
-        out.extend_from_slice(&x.to_le_bytes());
-    }
-    out.into()
+/// Pixels to append little-endian to a message.
+enum Pixels<'a> {
+    U8(&'a [u8]),
+    U16(&'a [u16]),
+    F32(&'a [f32]),
+    /// 32FC1 metres written as 16UC1 millimetres.
+    MetresAsMm(&'a [f32]),
 }
 
-fn depth_bytes(d: DepthImage, out: DepthOutput) -> (u32, u32, &'static str, u32, bytes::Bytes) {
-    match (d, out) {
-        (DepthImage::Millimetres(Plane { width, height, data }), _) => {
-            (width, height, "16UC1", 2, u16_bytes(&data))
+impl Pixels<'_> {
+    fn byte_len(&self) -> usize {
+        match self {
+            Pixels::U8(v) => v.len(),
+            Pixels::U16(v) => v.len() * 2,
+            Pixels::F32(v) => v.len() * 4,
+            Pixels::MetresAsMm(v) => v.len() * 2,
         }
-        (DepthImage::Metres(Plane { width, height, data }), DepthOutput::Millimetres16) => {
-            let mm: Vec<u16> = data.iter().map(|m| metres_to_mm(*m)).collect();
-            (width, height, "16UC1", 2, u16_bytes(&mm))
-        }
-        (DepthImage::Metres(Plane { width, height, data }), DepthOutput::AsDelivered) => {
-            let mut out = Vec::with_capacity(data.len() * 4);
-            for x in &data {
-                out.extend_from_slice(&x.to_le_bytes());
+    }
+
+    fn append_le(&self, out: &mut Vec<u8>) {
+        fn put<T: Copy, const N: usize>(out: &mut Vec<u8>, v: &[T], f: impl Fn(T) -> [u8; N]) {
+            let start = out.len();
+            out.resize(start + v.len() * N, 0);
+            for (d, x) in out[start..].chunks_exact_mut(N).zip(v) {
+                d.copy_from_slice(&f(*x));
             }
-            (width, height, "32FC1", 4, out.into())
+        }
+        match self {
+            Pixels::U8(v) => out.extend_from_slice(v),
+            Pixels::U16(v) => put(out, v, u16::to_le_bytes),
+            Pixels::F32(v) => put(out, v, f32::to_le_bytes),
+            Pixels::MetresAsMm(v) => put(out, v, |m| metres_to_mm(m).to_le_bytes()),
         }
     }
 }
