@@ -73,7 +73,9 @@ fn trip_event(trip: &Trip) -> SafetyEventMsg {
         TripKind::DoorOpen => (EventKind::DoorOpen, None, 1.0, 0.0),
         TripKind::OperatorStop => (EventKind::OperatorStop, None, 1.0, 0.0),
         TripKind::RecorderFailed => (EventKind::RecorderFailed, None, 1.0, 0.0),
-        TripKind::DeviceFailed { device } => (EventKind::DeviceFault, None, device as u8 as f64, 0.0),
+        TripKind::DeviceFailed { device } => {
+            (EventKind::DeviceFault, None, device as u8 as f64, 0.0)
+        }
     };
     SafetyEventMsg::numeric(trip.t_ns, kind, trip.tick, joint, value, limit)
 }

@@ -1,11 +1,149 @@
-//! `hitl eval` (being built: see the issues).
+//! `hitl eval RUN.mcap [--json] [--backend B]`: pose metrics of a recording, as the paper defines
+//! them (see `hitl_perception::metrics` and docs/perception.md).
+//!
+//! Ground truth is `/pose/gt`; the estimate is `/pose/estimate` matched by the frame's capture
+//! timestamp, or, with `--backend`, a backend re-run offline over the recorded frames. `scale`
+//! (lab metres per real metre) comes from the `run` metadata record unless `--scale` is given.
 
 use crate::exit;
+use hitl_perception::estimator::BackendSpec;
+use hitl_perception::metrics::{evaluate, PosePair};
+use hitl_perception::pose::Pose;
+use hitl_perception::replay::replay_frames;
+use hitl_perception::{backend_from_spec, TargetModel};
+use std::collections::HashMap;
+use std::path::PathBuf;
 
+/// Score a recording's pose estimates against its ground truth.
 #[derive(Debug, clap::Args)]
-pub struct EvalArgs {}
+pub struct EvalArgs {
+    /// The recording (MCAP); a file cut short by a crash is read up to its last complete chunk.
+    pub recording: PathBuf,
+    /// Print one JSON object (frames, scale, mean/median/std of e_t and e_r, failures, ...).
+    #[arg(long)]
+    pub json: bool,
+    /// Re-run a backend offline over the recorded frames: icp or onnx:MODEL.onnx.
+    #[arg(long)]
+    pub backend: Option<String>,
+    /// Target model for --backend: a built-in name (asymmetric, one-plane, two-planes) or an
+    /// .obj/.stl file (default: the run's `target_model` metadata, else asymmetric).
+    #[arg(long)]
+    pub target: Option<String>,
+    /// Lab metres per real metre (default: the run's `scale` metadata).
+    #[arg(long)]
+    pub scale: Option<f64>,
+}
 
-pub fn run(_args: EvalArgs) -> u8 {
-    eprintln!("hitl eval: not built yet");
-    exit::BAD_INPUT
+fn to_pose(m: [[f64; 4]; 4]) -> Pose {
+    Pose::from_fn(|r, c| m[r][c])
+}
+
+pub fn run(args: EvalArgs) -> u8 {
+    match eval(&args) {
+        Ok(v) => {
+            if args.json {
+                println!("{v}");
+            } else {
+                let g = |k: &str| v.get(k).cloned().unwrap_or(serde_json::Value::Null);
+                println!(
+                    "frames {} (failures {}), scale {}\n\
+                     e_t real m: mean {} median {} std {}\n\
+                     e_r deg:    mean {} median {} std {}",
+                    g("frames"),
+                    g("failures"),
+                    g("scale"),
+                    g("mean_et_m"),
+                    g("median_et_m"),
+                    g("std_et_m"),
+                    g("mean_er_deg"),
+                    g("median_er_deg"),
+                    g("std_er_deg")
+                );
+            }
+            exit::OK
+        }
+        Err(e) => {
+            eprintln!("hitl eval: {e}");
+            exit::BAD_INPUT
+        }
+    }
+}
+
+fn eval(args: &EvalArgs) -> Result<serde_json::Value, String> {
+    let path = &args.recording;
+    let rec = hitl_record::reader::read_recording(path).map_err(|e| e.to_string())?;
+    let run_meta = rec.metadata.get("run");
+    let scale = match args.scale {
+        Some(s) => s,
+        None => run_meta
+            .and_then(|m| m.get("scale"))
+            .ok_or_else(|| {
+                format!("{}: the run metadata has no `scale`; pass --scale", path.display())
+            })?
+            .parse::<f64>()
+            .map_err(|e| format!("{}: run metadata `scale`: {e}", path.display()))?,
+    };
+    if rec.pose_gt.is_empty() {
+        return Err(format!("{}: no /pose/gt messages", path.display()));
+    }
+    let mut extra = serde_json::Map::new();
+    let estimates: HashMap<u64, Pose> = match &args.backend {
+        None => {
+            rec.pose_estimate.iter().map(|p| (p.capture_ns, to_pose(p.pose.to_matrix()))).collect()
+        }
+        Some(b) => {
+            let spec: BackendSpec = b.parse().map_err(|e| format!("{e}"))?;
+            let target = args
+                .target
+                .clone()
+                .or_else(|| run_meta.and_then(|m| m.get("target_model")).cloned())
+                .unwrap_or_else(|| "asymmetric".to_string());
+            let model = TargetModel::from_spec(&target).map_err(|e| e.to_string())?;
+            let mesh = model.lab_mesh(scale).map_err(|e| e.to_string())?;
+            let mut est = backend_from_spec(&spec, &mesh)
+                .map_err(|e| e.to_string())?
+                .ok_or("--backend none has nothing to run")?;
+            let mut out = HashMap::new();
+            let mut errors = 0usize;
+            let t0 = std::time::Instant::now();
+            let summary = replay_frames(path, |f| match est.estimate(&f) {
+                Ok(e) => {
+                    if let Some(p) = e.pose {
+                        out.insert(f.timestamp_ns, p);
+                    }
+                }
+                Err(_) => errors += 1,
+            })
+            .map_err(|e| e.to_string())?;
+            let secs = t0.elapsed().as_secs_f64();
+            extra.insert("backend".into(), serde_json::json!(est.name()));
+            extra.insert("target".into(), serde_json::json!(target));
+            extra.insert("replayed_frames".into(), serde_json::json!(summary.frames));
+            extra.insert("backend_errors".into(), serde_json::json!(errors));
+            extra.insert(
+                "backend_fps".into(),
+                serde_json::json!(if secs > 0.0 { summary.frames as f64 / secs } else { 0.0 }),
+            );
+            out
+        }
+    };
+    let pairs: Vec<PosePair> = rec
+        .pose_gt
+        .iter()
+        .map(|g| PosePair {
+            timestamp_ns: g.capture_ns,
+            gt: to_pose(g.pose.to_matrix()),
+            est: estimates.get(&g.capture_ns).copied(),
+        })
+        .collect();
+    let m = evaluate(&pairs, scale).map_err(|e| e.to_string())?;
+    let mut v = m.to_json();
+    if let Some(obj) = v.as_object_mut() {
+        obj.extend(extra);
+        obj.insert(
+            "recording_complete".into(),
+            serde_json::json!(rec.end.as_ref().is_some_and(|e| e.complete)),
+        );
+    }
+    Ok(v)
 }

@@ -9,25 +9,28 @@ use super::stop::StopPlanner;
 use super::telemetry::LoopStatus;
 use super::tick::{ControlLoop, Devices, Health, LoopIo, Outcome, Program};
 use crate::capture::intake::{Intake, IntakeOutputs, IntakeStats};
-use crate::capture::sink::{IntakeQueues, RunTelemetry};
-use crate::capture::truth::LabFrames;
 #[cfg(feature = "stub")]
 use crate::capture::sim_light::SimLight;
+use crate::capture::sink::{IntakeQueues, RunTelemetry};
+use crate::capture::truth::LabFrames;
 use crate::devices::any::{RunCamera, RunLight};
 use crate::devices::inputs::RunInputs;
-use hitl_drivers::light::{LightSpec, SerialLight};
-use hitl_perception::{backend_from_spec, spawn_worker, BackendSpec, ReregisterPolicy};
-use hitl_record::{EventKind, PoseStamped, Recorder, RecorderHandle, RunMetadata, SafetyEventMsg, SunPhaseTrack, Telemetry};
-use hitl_hal::RgbdCamera as _;
-use sha2::Digest as _;
 use crate::devices::none::{NoCamera, NoInputs, NoLight};
 use crate::exit;
 use crate::rt::{self, slot::LatestSlot, RtOptions};
+use hitl_drivers::light::{LightSpec, SerialLight};
 use hitl_drivers::xarm::{ClientConfig, ReportConfig, ReportKind, ReportReader, XarmClient};
+use hitl_hal::RgbdCamera as _;
 use hitl_hal::{Arm, ArmReports, ArmState, Joints, MonotonicClock};
+use hitl_perception::{backend_from_spec, spawn_worker, BackendSpec, ReregisterPolicy};
+use hitl_record::{
+    EventKind, PoseStamped, Recorder, RecorderHandle, RunMetadata, SafetyEventMsg, SunPhaseTrack,
+    Telemetry,
+};
 use hitl_trajectories::lab::LabConfig;
 use hitl_trajectories::timing::SetpointTable;
 use hitl_trajectories::{npz, preflight, Trajectory};
+use sha2::Digest as _;
 use std::net::{IpAddr, SocketAddr, ToSocketAddrs};
 use std::path::PathBuf;
 use std::sync::atomic::{AtomicBool, Ordering};
@@ -297,7 +300,11 @@ struct EmbeddedStub {
 }
 
 #[cfg(feature = "stub")]
-fn start_stub(faults: &[String], lab: &LabConfig, target: &TargetScene) -> Result<EmbeddedStub, RunError> {
+fn start_stub(
+    faults: &[String],
+    lab: &LabConfig,
+    target: &TargetScene,
+) -> Result<EmbeddedStub, RunError> {
     use hitl_sim_stub::mjcf::TargetModel as StubTarget;
     use hitl_sim_stub::mujoco_plant::{LabModel, MujocoPlant};
     use hitl_sim_stub::{Fault, Stub, StubConfig};
@@ -314,8 +321,8 @@ fn start_stub(faults: &[String], lab: &LabConfig, target: &TargetScene) -> Resul
     let plant = MujocoPlant::from_lab_model(lab_model.clone());
     let arm = plant.shared_state();
     let config = StubConfig { faults, ..StubConfig::ephemeral() };
-    let handle = Stub::start(config, Box::new(plant))
-        .map_err(|e| RunError::Device(format!("stub: {e}")))?;
+    let handle =
+        Stub::start(config, Box::new(plant)).map_err(|e| RunError::Device(format!("stub: {e}")))?;
     Ok(EmbeddedStub { handle, lab_model, arm, light: Default::default() })
 }
 
@@ -336,11 +343,7 @@ fn target_scene(req: &RunRequest, traj: &Trajectory) -> Result<TargetScene, RunE
         .and_then(|m| serde_json::from_str::<serde_json::Value>(m).ok())
         .and_then(|v| v.get("scale")?.as_f64())
         .filter(|s| *s > 0.0 && s.is_finite());
-    let lab_size = req
-        .lab
-        .target
-        .model_size_m
-        .unwrap_or(2.0 * req.lab.target.keepout_radius_m);
+    let lab_size = req.lab.target.model_size_m.unwrap_or(2.0 * req.lab.target.keepout_radius_m);
     let scale = planned.unwrap_or(lab_size / model.greatest_dimension_m());
     Ok(TargetScene { model, scale })
 }
@@ -365,17 +368,24 @@ fn open_devices(
     #[cfg(feature = "stub")] stub: Option<&EmbeddedStub>,
     clock: MonotonicClock,
 ) -> Result<RunDevices, RunError> {
-    let spec: LightSpec = req.light.parse().map_err(|e: hitl_drivers::light::spec::LightSpecError| RunError::BadInput(e.to_string()))?;
+    let spec: LightSpec =
+        req.light.parse().map_err(|e: hitl_drivers::light::spec::LightSpecError| {
+            RunError::BadInput(e.to_string())
+        })?;
     #[cfg(feature = "stub")]
     let sim_needed = |what: &str| -> Result<&EmbeddedStub, RunError> {
-        stub.ok_or_else(|| RunError::BadInput(format!("--{what} sim needs the embedded stub (no --arm)")))
+        stub.ok_or_else(|| {
+            RunError::BadInput(format!("--{what} sim needs the embedded stub (no --arm)"))
+        })
     };
     let light = match &spec {
         LightSpec::None => RunLight::None(NoLight),
         #[cfg(feature = "stub")]
         LightSpec::Sim => RunLight::Sim(SimLight(sim_needed("light")?.light.clone())),
         #[cfg(not(feature = "stub"))]
-        LightSpec::Sim => return Err(RunError::BadInput("--light sim needs the stub feature".into())),
+        LightSpec::Sim => {
+            return Err(RunError::BadInput("--light sim needs the stub feature".into()))
+        }
         other => {
             let rt = tokio::runtime::Builder::new_current_thread()
                 .enable_all()
@@ -397,15 +407,19 @@ fn open_devices(
             use hitl_sim_stub::camera::{Preset, SimCamera, SimCameraConfig};
             let s = sim_needed("camera")?;
             let preset = Preset::from_name(&req.camera_preset).ok_or_else(|| {
-                RunError::BadInput(format!("--camera-preset {}: expected nfov, wfov or orbbec", req.camera_preset))
+                RunError::BadInput(format!(
+                    "--camera-preset {}: expected nfov, wfov or orbbec",
+                    req.camera_preset
+                ))
             })?;
             let intrinsics = match req.camera_size {
                 Some((w, h)) => preset.at(w, h),
                 None => preset.intrinsics(),
             };
             let config = SimCameraConfig { intrinsics, clock, ..Default::default() };
-            let mut cam = SimCamera::new(s.lab_model.clone(), s.arm.clone(), s.light.clone(), config)
-                .map_err(|e| RunError::Device(e.to_string()))?;
+            let mut cam =
+                SimCamera::new(s.lab_model.clone(), s.arm.clone(), s.light.clone(), config)
+                    .map_err(|e| RunError::Device(e.to_string()))?;
             cam.arm_trigger().map_err(|e| RunError::Device(e.to_string()))?;
             RunCamera::Sim(Box::new(cam))
         }
@@ -417,7 +431,9 @@ fn open_devices(
             RunCamera::Orbbec(Box::new(cam))
         }
         other => {
-            return Err(RunError::BadInput(format!("--camera {other}: expected sim, orbbec or none")))
+            return Err(RunError::BadInput(format!(
+                "--camera {other}: expected sim, orbbec or none"
+            )))
         }
     };
     #[cfg(feature = "stub")]
@@ -477,10 +493,10 @@ fn start_recorder(
 pub fn run(req: RunRequest) -> Result<RunReport, RunError> {
     let (traj, table) = prepare(&req)?;
     let scene = target_scene(&req, &traj)?;
-    let backend: BackendSpec = req
-        .perception
-        .parse()
-        .map_err(|e: hitl_perception::PerceptionError| RunError::BadInput(format!("--perception: {e}")))?;
+    let backend: BackendSpec =
+        req.perception.parse().map_err(|e: hitl_perception::PerceptionError| {
+            RunError::BadInput(format!("--perception: {e}"))
+        })?;
     let clock = MonotonicClock::new();
 
     // The arm: the embedded stub, or the real box.
@@ -492,12 +508,17 @@ pub fn run(req: RunRequest) -> Result<RunReport, RunError> {
     let (cmd_addr, report_host) = match &req.target {
         #[cfg(feature = "stub")]
         ArmTarget::Stub { .. } => {
-            let addr = stub.as_ref().map(|s| s.handle.cmd_addr()).ok_or_else(|| RunError::Device("stub did not start".into()))?;
+            let addr = stub
+                .as_ref()
+                .map(|s| s.handle.cmd_addr())
+                .ok_or_else(|| RunError::Device("stub did not start".into()))?;
             (addr, addr.ip())
         }
         #[cfg(not(feature = "stub"))]
         ArmTarget::Stub { .. } => {
-            return Err(RunError::BadInput("this build has no embedded stub: pass --arm HOST".into()))
+            return Err(RunError::BadInput(
+                "this build has no embedded stub: pass --arm HOST".into(),
+            ))
         }
         ArmTarget::Remote { host } => {
             let addr = resolve(host, hitl_drivers::xarm::COMMAND_PORT)?;
@@ -529,7 +550,8 @@ pub fn run(req: RunRequest) -> Result<RunReport, RunError> {
     let (perception, estimates) = match &backend {
         BackendSpec::None => (None, None),
         spec => {
-            let mesh = scene.model.lab_mesh(scene.scale).map_err(|e| RunError::BadInput(e.to_string()))?;
+            let mesh =
+                scene.model.lab_mesh(scene.scale).map_err(|e| RunError::BadInput(e.to_string()))?;
             let estimator = backend_from_spec(spec, &mesh)
                 .map_err(|e| RunError::BadInput(format!("--perception: {e}")))?;
             match estimator {
@@ -544,7 +566,10 @@ pub fn run(req: RunRequest) -> Result<RunReport, RunError> {
                         while let Some(r) = results.recv().await {
                             if let (Ok(est), Some(sink)) = (&r.estimate, &sink) {
                                 if let Some(m) = est.pose {
-                                    sink.push_pose_estimate(&PoseStamped { capture_ns: r.timestamp_ns, pose: record_pose(&m) });
+                                    sink.push_pose_estimate(&PoseStamped {
+                                        capture_ns: r.timestamp_ns,
+                                        pose: record_pose(&m),
+                                    });
                                 }
                             }
                             n += 1;
@@ -599,10 +624,8 @@ pub fn run(req: RunRequest) -> Result<RunReport, RunError> {
         approach,
     };
 
-    let health = Health {
-        recorder: recorder.as_ref().map(|(h, _)| h.health()),
-        ..Health::default()
-    };
+    let health =
+        Health { recorder: recorder.as_ref().map(|(h, _)| h.health()), ..Health::default() };
     let status = Arc::new(LoopStatus::default());
     let limits = &req.lab.limits;
     let stop_limits = MoveLimits {
@@ -616,7 +639,10 @@ pub fn run(req: RunRequest) -> Result<RunReport, RunError> {
     install_ctrlc(&health);
     let io = LoopIo {
         reports,
-        telemetry: RunTelemetry { record: record_telemetry.clone(), intake: Arc::clone(&intake_queues) },
+        telemetry: RunTelemetry {
+            record: record_telemetry.clone(),
+            intake: Arc::clone(&intake_queues),
+        },
         status: Arc::clone(&status),
         health,
         stop,

@@ -1,0 +1,250 @@
+//! `hitl run` end to end against the embedded MuJoCo stub: a numpy-written trajectory plays to
+//! the end, the playback setpoints are the time-parametrised trajectory bit for bit (and the same
+//! in two runs), the arm ends on the last waypoint, and every interlock injected through
+//! `--stub-fault` ends in its stop, its `/safety/event` and its exit code with the recording
+//! readable. Runs are serialised: each one drives a real-time loop and a physics thread.
+
+use hitl_record::reader::read_recording;
+use hitl_record::Phase;
+use hitl_trajectories::{npz, timing::SetpointTable};
+use std::path::{Path, PathBuf};
+use std::process::{Command, Output, Stdio};
+use std::sync::Mutex;
+
+static ONE_AT_A_TIME: Mutex<()> = Mutex::new(());
+
+const HOME: [f64; 7] = [0.0, -0.5, 0.0, 0.9, 0.0, 1.4, 0.0];
+
+/// A 3 s sweep of joint 1 from the stub's power-up pose (no approach), written by numpy.
+fn numpy_trajectory(dir: &Path) -> PathBuf {
+    let path = dir.join("sweep.npz");
+    let script = format!(
+        "import numpy as np\n\
+         t = np.linspace(0, 3, 31)\n\
+         q = np.tile({HOME:?}, (31, 1)).astype(float)\n\
+         q[:, 0] = -0.3 * np.sin(np.pi * t / 3) ** 2\n\
+         cap = np.zeros(31, bool); cap[::10] = True\n\
+         np.savez(r'{}', qpos=q, t=t, capture=cap, light=np.ones(31, np.float32))\n",
+        path.display()
+    );
+    let out = Command::new(env!("HITL_VENV_PYTHON"))
+        .arg("-c")
+        .arg(&script)
+        .output()
+        .expect("the venv's python (run make setup)");
+    assert!(out.status.success(), "numpy: {}", String::from_utf8_lossy(&out.stderr));
+    path
+}
+
+fn hitl(args: &[&str]) -> Output {
+    Command::new(env!("CARGO_BIN_EXE_hitl"))
+        .args(args)
+        .stdin(Stdio::null())
+        .output()
+        .expect("run hitl")
+}
+
+struct Run {
+    out: Output,
+    mcap: PathBuf,
+    _dir: tempfile::TempDir,
+    traj: PathBuf,
+}
+
+fn run_with(extra: &[&str]) -> Run {
+    run_with_camera("none", extra)
+}
+
+fn run_with_camera(camera: &str, extra: &[&str]) -> Run {
+    let dir = tempfile::tempdir().expect("tempdir");
+    let traj = numpy_trajectory(dir.path());
+    let mcap = dir.path().join("run.mcap");
+    let mut args = vec![
+        "run",
+        traj.to_str().expect("utf-8"),
+        "--record",
+        mcap.to_str().expect("utf-8"),
+        "--camera",
+        camera,
+        "--light",
+        "sim",
+        "--plain",
+    ];
+    args.extend_from_slice(extra);
+    let out = hitl(&args);
+    Run { out, mcap, _dir: dir, traj }
+}
+
+fn code(out: &Output) -> i32 {
+    out.status.code().unwrap_or(-1)
+}
+
+fn text(out: &Output) -> String {
+    format!("{}{}", String::from_utf8_lossy(&out.stdout), String::from_utf8_lossy(&out.stderr))
+}
+
+#[test]
+fn a_numpy_trajectory_plays_to_the_end_on_the_table_and_the_arm_ends_on_the_last_waypoint() {
+    let _one = ONE_AT_A_TIME.lock().unwrap_or_else(|e| e.into_inner());
+    let run = run_with(&[]);
+    assert_eq!(code(&run.out), 0, "{}", text(&run.out));
+    assert!(text(&run.out).contains("settled on the last waypoint"), "{}", text(&run.out));
+
+    let rec = read_recording(&run.mcap).expect("readable recording");
+    let traj = npz::load(&run.traj).expect("load").trajectory;
+    let table = SetpointTable::build(&traj, 250.0, 1.0).expect("table");
+    let playback: Vec<_> = rec.setpoints.iter().filter(|s| s.phase == Phase::Playback).collect();
+    assert!(playback.len() >= table.ticks(), "{} playback setpoints", playback.len());
+    for (k, sp) in playback.iter().take(table.ticks()).enumerate() {
+        assert_eq!(sp.q, table.q[k], "setpoint {k} differs from the time-parametrised trajectory");
+    }
+    let last = table.q[table.ticks() - 1];
+    let measured = rec.states.last().expect("arm states").q;
+    for j in 0..7 {
+        assert!((measured[j] - last[j]).abs() < 0.003, "joint {j}: {} vs {}", measured[j], last[j]);
+    }
+    assert!(rec.events.is_empty(), "no safety events: {:?}", rec.events);
+}
+
+#[test]
+fn two_runs_emit_the_same_playback_setpoint_stream_bit_for_bit() {
+    let _one = ONE_AT_A_TIME.lock().unwrap_or_else(|e| e.into_inner());
+    let streams: Vec<Vec<([u64; 7], [u64; 7])>> = (0..2)
+        .map(|_| {
+            let run = run_with(&[]);
+            assert_eq!(code(&run.out), 0, "{}", text(&run.out));
+            let rec = read_recording(&run.mcap).expect("readable");
+            rec.setpoints
+                .iter()
+                .filter(|s| s.phase == Phase::Playback)
+                .map(|s| (s.q.map(f64::to_bits), s.qd.map(f64::to_bits)))
+                .collect()
+        })
+        .collect();
+    assert!(!streams[0].is_empty());
+    assert_eq!(streams[0], streams[1]);
+}
+
+/// Inject a fault 1.2 s into the run (during playback) and check exit code, stop and event.
+fn fault_case(fault: &str, exit: i32, event: &str, controlled_stop: bool) {
+    let _one = ONE_AT_A_TIME.lock().unwrap_or_else(|e| e.into_inner());
+    let spec = format!("{fault}@1.2");
+    let run = run_with(&["--stub-fault", &spec]);
+    let all = text(&run.out);
+    assert_eq!(code(&run.out), exit, "{fault}: {all}");
+    let rec = read_recording(&run.mcap).expect("the recording stays readable");
+    assert!(
+        rec.events.iter().any(|e| e.kind == event),
+        "{fault}: no '{event}' event in {:?}",
+        rec.events
+    );
+    let stops = rec.setpoints.iter().filter(|s| s.phase == Phase::Stop).count();
+    if controlled_stop {
+        assert!(stops > 0, "{fault}: no stop setpoints recorded");
+        let last = rec.setpoints.last().expect("setpoints");
+        assert!(last.qd.iter().all(|v| v.abs() < 1e-9), "{fault}: stop did not end at rest");
+        assert!(all.contains("controlled stop completed"), "{all}");
+    } else {
+        assert_eq!(stops, 0, "{fault}: a hold sends no stop trajectory");
+    }
+}
+
+#[test]
+fn estop_holds_and_exits_4() {
+    fault_case("estop", 4, "e-stop", false);
+}
+
+#[test]
+fn door_open_stops_and_exits_4() {
+    fault_case("door-open", 4, "door-open", true);
+}
+
+#[test]
+fn stalled_reports_trip_the_watchdog_and_exit_4() {
+    fault_case("stall-reports", 4, "report-watchdog", true);
+}
+
+#[test]
+fn an_arm_error_holds_and_exits_4() {
+    fault_case("arm-error", 4, "arm-error", false);
+}
+
+#[test]
+fn deviation_beyond_the_threshold_stops_and_exits_4() {
+    fault_case("deviation:0.2", 4, "deviation", true);
+}
+
+#[test]
+fn a_dropped_connection_holds_and_exits_5() {
+    fault_case("drop-connection", 5, "device-fault", false);
+}
+
+#[test]
+fn ctrl_c_takes_a_controlled_stop_and_exits_130() {
+    let _one = ONE_AT_A_TIME.lock().unwrap_or_else(|e| e.into_inner());
+    let dir = tempfile::tempdir().expect("tempdir");
+    let traj = numpy_trajectory(dir.path());
+    let mcap = dir.path().join("run.mcap");
+    let child = Command::new(env!("CARGO_BIN_EXE_hitl"))
+        .args(["run", traj.to_str().expect("utf-8"), "--record"])
+        .arg(&mcap)
+        .args(["--camera", "none", "--light", "sim", "--plain"])
+        .stdin(Stdio::null())
+        .stdout(Stdio::piped())
+        .stderr(Stdio::piped())
+        .spawn()
+        .expect("spawn hitl");
+    // Wait until playback has begun, then press Ctrl-C.
+    std::thread::sleep(std::time::Duration::from_millis(1500));
+    let status = Command::new("kill").args(["-INT", &child.id().to_string()]).status();
+    assert!(status.is_ok_and(|s| s.success()));
+    let out = child.wait_with_output().expect("wait");
+    assert_eq!(code(&out), 130, "{}", text(&out));
+    let rec = read_recording(&mcap).expect("closed properly after Ctrl-C");
+    assert!(rec.end.as_ref().is_some_and(|e| e.complete), "the file has its footer");
+    assert!(rec.events.iter().any(|e| e.kind == "operator-stop"), "{:?}", rec.events);
+    assert!(rec.setpoints.iter().any(|s| s.phase == Phase::Stop));
+}
+
+#[test]
+fn a_recorder_that_cannot_write_trips_the_interlock_and_leaves_a_readable_file() {
+    let _one = ONE_AT_A_TIME.lock().unwrap_or_else(|e| e.into_inner());
+    let dir = tempfile::tempdir().expect("tempdir");
+    let traj = numpy_trajectory(dir.path());
+    let mcap = dir.path().join("run.mcap");
+    // A 96 KiB file-size limit (ulimit -f counts 1024-byte blocks); SIGXFSZ ignored so the
+    // write fails with EFBIG instead of killing the process.
+    let script = format!(
+        "trap '' XFSZ; ulimit -f 96; exec '{}' run '{}' --record '{}' --camera sim \
+         --camera-size 320x256 --light sim --plain",
+        env!("CARGO_BIN_EXE_hitl"),
+        traj.display(),
+        mcap.display()
+    );
+    let out =
+        Command::new("bash").arg("-c").arg(&script).stdin(Stdio::null()).output().expect("bash");
+    let all = text(&out);
+    assert_eq!(code(&out), 4, "{all}");
+    assert!(all.contains("recorder-failed"), "{all}");
+    let rec = read_recording(&mcap).expect("what was written stays readable");
+    assert!(!rec.setpoints.is_empty());
+}
+
+#[test]
+fn an_orbbec_camera_that_is_not_there_fails_before_anything_moves_with_exit_5() {
+    let _one = ONE_AT_A_TIME.lock().unwrap_or_else(|e| e.into_inner());
+    let run = run_with_camera("orbbec", &[]);
+    let all = text(&run.out);
+    assert_eq!(code(&run.out), 5, "{all}");
+    assert!(all.contains("Orbbec"), "{all}");
+    assert!(!all.contains("tick "), "nothing moved: {all}");
+}
+
+#[test]
+fn a_real_arm_is_never_moved_without_confirmation() {
+    let dir = tempfile::tempdir().expect("tempdir");
+    let traj = numpy_trajectory(dir.path());
+    let out = hitl(&["run", traj.to_str().expect("utf-8"), "--arm", "127.0.0.1"]);
+    assert_eq!(code(&out), 2, "{}", text(&out));
+    assert!(text(&out).contains("refusing to move the real arm"), "{}", text(&out));
+}
