@@ -19,6 +19,7 @@ pub mod normalize;
 pub mod onnx;
 pub mod pnp;
 pub mod pose;
+pub mod replay;
 pub mod socket;
 pub mod testing;
 pub mod worker;
