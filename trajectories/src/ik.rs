@@ -339,6 +339,12 @@ fn march(
     (solve(target, &q, mount, scene, opts), iterations)
 }
 
+/// How far a camera pose moves: translation plus rotation times a 0.1 m lever.
+fn pose_step(a: &Isometry3<f64>, b: &Isometry3<f64>) -> f64 {
+    let e = pose_error(b, a);
+    e.fixed_rows::<3>(0).norm() + 0.1 * e.fixed_rows::<3>(3).norm()
+}
+
 /// Solve `poses` in order from `seed`, each warm-started from the previous solution. A waypoint
 /// whose pose equals the previous one keeps the previous joints exactly (a held pose does not
 /// drift along the self-motion). A large joint step is re-solved by marching through
@@ -360,7 +366,15 @@ pub fn track(
     };
     let mut warm = *seed;
     let mut prev: Option<(Joints, Isometry3<f64>)> = None;
-    for pose in poses {
+    // The self-motion per waypoint is scaled by how far the pose moves (against the path's
+    // largest step), so the arm comes to rest with the pose at rest-to-rest ends.
+    let steps: Vec<f64> =
+        std::iter::once(0.0).chain(poses.windows(2).map(|w| pose_step(&w[0], &w[1]))).collect();
+    let largest = steps.iter().copied().fold(0.0, f64::max);
+    for (k, pose) in poses.iter().enumerate() {
+        let weight = if largest > 0.0 { steps[k] / largest } else { 0.0 };
+        let scaled = IkOptions { null_gain: opts.null_gain * weight, ..opts.clone() };
+        let opts = &scaled;
         if let Some((q, p)) = &prev {
             if p == pose {
                 out.cost += secondary_cost(q, scene, opts);

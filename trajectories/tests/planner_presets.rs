@@ -11,6 +11,26 @@ fn preset_dir() -> PathBuf {
     PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("presets")
 }
 
+/// `HITL_WRITE_PRESETS=1 cargo test -p hitl-trajectories --release --test planner_presets` writes
+/// the presets (the same bytes as the `hitl plan` commands in presets/README.md) and prints their
+/// summaries; without the variable it does nothing.
+#[test]
+fn write_presets_when_asked() {
+    if std::env::var_os("HITL_WRITE_PRESETS").is_none() {
+        return;
+    }
+    let lab = LabConfig::default();
+    for p in presets::committed() {
+        let plan = planner::plan(&p.request, &lab, &mut |_, _| {}).expect(p.file);
+        let table = timing::SetpointTable::build(&plan.trajectory, timing::DEFAULT_RATE_HZ, 1.0)
+            .expect("timing");
+        let report = preflight::check(&plan.trajectory, &table, &lab);
+        println!("{}: {}", p.file, serde_json::to_string(&plan.summary).unwrap_or_default());
+        println!("  preflight safe: {} {:?}", report.is_safe(), report.violations);
+        npz::save(&preset_dir().join(p.file), &plan.trajectory, true).expect("save");
+    }
+}
+
 #[test]
 fn regeneration_reproduces_the_committed_presets_bit_for_bit() {
     let lab = LabConfig::default();
@@ -42,6 +62,8 @@ fn numpy_reads_the_planner_output() {
         timing: Timing::DurationS(8.0),
         waypoints: Some(41),
         capture_every: 5,
+        // Half the orbit: 41 waypoints are too coarse for the wrist's fast stretch near u = 530.
+        arc_deg: Some((270.0, 450.0)),
         ..PlanRequest::default()
     };
     let plan = planner::plan(&req, &lab, &mut |_, _| {}).expect("plan");

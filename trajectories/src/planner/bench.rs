@@ -9,16 +9,22 @@ use crate::lab::LabConfig;
 use serde_json::json;
 use std::time::Instant;
 
+/// The request whose camera poses the benchmark solves (`hitl plan --preset flyaround
+/// --duration-s 60 --waypoints N` makes the same poses for `scripts/bench_ik.py`).
+pub fn bench_request(waypoints: usize) -> PlanRequest {
+    PlanRequest {
+        waypoints: Some(waypoints.max(2)),
+        timing: Timing::DurationS(60.0),
+        ..PlanRequest::default()
+    }
+}
+
 /// Time the IK of a one-revolution 50 m fly-around with `waypoints` waypoints (the default lab,
 /// 60 s playback). Returns figures as JSON: seed search and tracking times, per-waypoint time,
 /// iterations, and the worst FK residuals of the solutions.
 pub fn bench_ik(waypoints: usize) -> serde_json::Value {
     let lab = LabConfig::default();
-    let req = PlanRequest {
-        waypoints: Some(waypoints.max(2)),
-        timing: Timing::DurationS(60.0),
-        ..PlanRequest::default()
-    };
+    let req = bench_request(waypoints);
     let path = match orbit_path(&req, &lab) {
         Ok(p) => p,
         Err(e) => return json!({ "error": e.to_string() }),

@@ -26,12 +26,12 @@ pub fn committed() -> Vec<CommittedPreset> {
             },
         },
         CommittedPreset {
-            file: "flyaround-50m-20s.npz",
-            flags: "--preset flyaround --range-m 50 --duration-s 20",
+            file: "flyaround-50m-25s.npz",
+            flags: "--preset flyaround --range-m 50 --duration-s 25",
             request: PlanRequest {
                 preset: Preset::Flyaround,
                 range_m: 50.0,
-                timing: Timing::DurationS(20.0),
+                timing: Timing::DurationS(25.0),
                 ..PlanRequest::default()
             },
         },
