@@ -25,6 +25,8 @@ pub struct IntakeStats {
     pub recorded: u64,
     /// Frames that could not be recorded or were lost before the intake (each is an event).
     pub not_recorded: u64,
+    /// Captures the camera was too busy to take (each is a `capture-not-recorded` event).
+    pub captures_missed: u64,
     /// Frames handed to perception.
     pub to_perception: u64,
     /// Exposure minus trigger, nanoseconds: mean and largest magnitude.
@@ -110,6 +112,7 @@ impl Worker {
                 std::thread::sleep(Duration::from_millis(2));
             }
         }
+        self.stats.captures_missed = self.queues.captures_missed.load(Ordering::Relaxed);
         self.stats
     }
 
@@ -182,6 +185,10 @@ impl Worker {
             let mut rec = FrameRecord::from_rgbd(frame);
             rec.gt_pose = Some(pose(&gt));
             rec.tf = Some(self.frames.tf(rec.capture_ns, &q));
+            let deadline = std::time::Instant::now() + Duration::from_secs(2);
+            while !record.frame_queue_has_room() && std::time::Instant::now() < deadline {
+                std::thread::sleep(Duration::from_millis(5));
+            }
             if record.push_frame(rec) {
                 self.stats.recorded += 1;
             } else {

@@ -22,6 +22,8 @@ pub struct IntakeQueues {
     pub captures: ArrayQueue<CaptureOut>,
     /// Frames handed over by the camera (queued or lost).
     pub frames_in: AtomicU64,
+    /// Captures the camera was too busy to take.
+    pub captures_missed: AtomicU64,
     /// Frames that found the intake queue full.
     pub frames_lost: AtomicU64,
 }
@@ -33,6 +35,7 @@ impl IntakeQueues {
             states: ArrayQueue::new(4096),
             captures: ArrayQueue::new(256),
             frames_in: AtomicU64::new(0),
+            captures_missed: AtomicU64::new(0),
             frames_lost: AtomicU64::new(0),
         }
     }
@@ -126,6 +129,20 @@ impl TelemetrySink for RunTelemetry {
         if let Some(r) = &self.record {
             r.push_event(trip_event(trip));
         }
+    }
+
+    fn capture_missed(&self, tick: u64, t_ns: u64) {
+        if let Some(r) = &self.record {
+            r.push_event(SafetyEventMsg::numeric(
+                t_ns,
+                EventKind::CaptureNotRecorded,
+                tick,
+                None,
+                0.0,
+                0.0,
+            ));
+        }
+        self.intake.captures_missed.fetch_add(1, Ordering::Relaxed);
     }
 
     fn frame(&self, frame: RgbdFrame) {

@@ -135,10 +135,11 @@ impl RunReport {
         );
         if self.intake.frames > 0 {
             s.push_str(&format!(
-                "\nframes {} (recorded {}, not recorded {}), sync error mean {:.2} ms max {:.2} ms, pose estimates {}",
+                "\nframes {} (recorded {}, not recorded {}, camera busy {}), sync error mean {:.2} ms max {:.2} ms, pose estimates {}",
                 self.intake.frames,
                 self.intake.recorded,
                 self.intake.not_recorded,
+                self.intake.captures_missed,
                 self.intake.sync_error_mean_ns / 1e6,
                 self.intake.sync_error_max_ns as f64 / 1e6,
                 self.estimates
@@ -221,6 +222,11 @@ fn approach_table(
 }
 
 /// Plan the slow move from the arm's pose to the first waypoint and check it like a trajectory.
+///
+/// Two shapes are tried, each a chain of Ruckig rest-to-rest moves: the direct joint-space move,
+/// then one that first turns base and wrist while shoulder and elbow stay where they are (the arm
+/// keeps its reach) and extends only at the end. The first that passes every preflight rule is
+/// taken; when none does, the run is refused with the direct move's violations.
 fn plan_approach(
     start: &Joints,
     table: &SetpointTable,
@@ -232,20 +238,36 @@ fn plan_approach(
         l.approach_acceleration_rad_s2,
         l.approach_jerk_rad_s3,
     );
-    let approach = plan_move(start, &table.q[0], &limits, table.dt)
-        .map_err(|e| RunError::Refused(format!("approach: {e}")))?;
-    if approach.is_empty() {
-        return Ok(approach);
+    let goal = table.q[0];
+    let mut keep_reach = goal;
+    keep_reach[1] = start[1];
+    keep_reach[3] = start[3];
+    let shapes: [&[Joints]; 2] = [&[goal], &[keep_reach, goal]];
+    let mut first_refusal = None;
+    for shape in shapes {
+        let mut path = Vec::new();
+        let mut from = *start;
+        for via in shape {
+            let leg = plan_move(&from, via, &limits, table.dt)
+                .map_err(|e| RunError::Refused(format!("approach: {e}")))?;
+            path.extend(leg);
+            from = *via;
+        }
+        if path.is_empty() {
+            return Ok(path);
+        }
+        let (traj, approach_table) = approach_table(&path, start, table.rate_hz);
+        let report = preflight::check(&traj, &approach_table, lab);
+        if report.is_safe() {
+            return Ok(path);
+        }
+        first_refusal.get_or_insert_with(|| violations(&report));
     }
-    let (traj, approach_table) = approach_table(&approach, start, table.rate_hz);
-    let report = preflight::check(&traj, &approach_table, lab);
-    if !report.is_safe() {
-        return Err(RunError::Refused(format!(
-            "the approach from the arm's pose to the first waypoint is unsafe:\n{}",
-            violations(&report)
-        )));
-    }
-    Ok(approach)
+    Err(RunError::Refused(format!(
+        "the approach from the arm's pose to the first waypoint is unsafe (move the arm nearer \
+         the trajectory's start first):\n{}",
+        first_refusal.unwrap_or_default()
+    )))
 }
 
 fn resolve(host: &str, port: u16) -> Result<SocketAddr, RunError> {

@@ -48,6 +48,8 @@ pub trait TelemetrySink {
     fn light(&self, t_ns: u64, level: f32);
     fn capture(&self, c: &CaptureOut);
     fn trip(&self, trip: &Trip);
+    /// A capture the camera could not take now (busy): recorded as a capture not recorded.
+    fn capture_missed(&self, tick: u64, t_ns: u64);
     /// A frame the camera delivered: moved on (never copied) to the capture intake.
     fn frame(&self, frame: RgbdFrame);
 }
@@ -63,6 +65,7 @@ impl TelemetrySink for NoTelemetry {
     fn light(&self, _: u64, _: f32) {}
     fn capture(&self, _: &CaptureOut) {}
     fn trip(&self, _: &Trip) {}
+    fn capture_missed(&self, _: u64, _: u64) {}
     fn frame(&self, _: RgbdFrame) {}
 }
 

@@ -374,8 +374,16 @@ where
         if !p.capture.get(i as usize).copied().unwrap_or(false) {
             return;
         }
-        if self.devices.camera.trigger(CaptureRequest { tick: k, fired_ns: now }).is_err() {
-            self.device_failed.get_or_insert(Device::Camera);
+        match self.devices.camera.trigger(CaptureRequest { tick: k, fired_ns: now }) {
+            Ok(()) => {}
+            // Busy: this capture is lost (and recorded as such); the camera still works.
+            Err(e) if e.kind() == ErrorKind::Timeout => {
+                self.telemetry.capture_missed(k, now);
+                return;
+            }
+            Err(_) => {
+                self.device_failed.get_or_insert(Device::Camera);
+            }
         }
         self.telemetry.capture(&CaptureOut {
             tick: k,
