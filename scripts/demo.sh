@@ -1,26 +1,32 @@
 #!/usr/bin/env bash
-# The main job, end to end on the MuJoCo stub: check a preset trajectory, play it with every
-# interlock armed while recording camera frames and telemetry, then report and score the run.
+# The main job, end to end on the MuJoCo stub: plan a 10 m fly-around from the paper's orbital
+# mechanics, preflight it, play it with every interlock armed while the simulated camera captures
+# frames and the ICP tracker estimates the target's pose, record everything, then report and
+# score the run with the paper's metrics.
 set -euo pipefail
 cd "$(dirname "$0")/.."
 HITL=./target/release/hitl
-PRESET=${PRESET:-trajectories/presets/flyaround-demo.npz}
 OUT=${OUT:-runs/demo}
 mkdir -p "$OUT"
 
-echo "== hitl check $PRESET"
-$HITL check "$PRESET"
+echo "== hitl plan: 10 m fly-around, 20 s, a capture every 5th waypoint"
+$HITL plan --preset flyaround --range-m 10 --duration-s 20 --capture-every 5 --out "$OUT/flyaround-10m.npz"
 
 echo
-echo "== hitl run $PRESET --record $OUT/run.mcap (embedded MuJoCo stub)"
-$HITL run "$PRESET" --record "$OUT/run.mcap" --camera sim --light sim --perception icp --plain
+echo "== hitl check (preflight)"
+$HITL check "$OUT/flyaround-10m.npz"
 
 echo
-echo "== hitl report $OUT/run.mcap"
+echo "== hitl run on the embedded MuJoCo stub, recording to $OUT/run.mcap"
+$HITL run "$OUT/flyaround-10m.npz" --record "$OUT/run.mcap" --camera sim --camera-preset wfov \
+  --camera-size 320x256 --light sim --perception icp --plain
+
+echo
+echo "== hitl report"
 $HITL report "$OUT/run.mcap" --out "$OUT/report"
 
 echo
-echo "== hitl eval $OUT/run.mcap"
+echo "== hitl eval (the paper's metrics: e_t in real metres, e_r in degrees)"
 $HITL eval "$OUT/run.mcap"
 echo
-echo "Open $OUT/report/index.html for the plots."
+echo "Report: $OUT/report/index.html"

@@ -12,6 +12,22 @@ pub enum Which {
     /// Real-time loop wake-up lateness (p50/p99/p99.9/max, overruns), idle and under load, side
     /// by side with a plain Python sleep loop.
     Loop,
+    /// Loading a 100 000-waypoint NPZ and time-parametrising it, side by side with numpy's load.
+    Npz,
+    /// IK for a 3600-waypoint orbit (the Python side: see README).
+    Ik,
+    /// servo_j round trips on loopback against the stub, the command rate it sustains, its
+    /// real-time factor.
+    Protocol,
+    /// Simulated camera frames/s at 320x256 and 1280x1024, trigger-to-frame latency.
+    Render,
+    /// Sustained recording of depth + colour at 30 fps plus 250 Hz telemetry, side by side with
+    /// numpy savez_compressed per depth frame.
+    Record,
+    /// ICP tracker frames/s at --size.
+    Tracker,
+    /// Pose accuracy (paper's metrics) on synthetic fly-arounds at 5, 10, 25 and 50 m.
+    Accuracy,
 }
 
 #[derive(Debug, clap::Args)]
@@ -34,9 +50,29 @@ pub struct BenchArgs {
     /// Spin for the last N microseconds before each deadline.
     #[arg(long, default_value_t = 0, value_name = "US")]
     pub spin_us: u64,
+    /// Image size for the tracker and accuracy benchmarks.
+    #[arg(long, default_value = "320x256", value_name = "WxH")]
+    pub size: String,
+    /// Frames per model for the tracker and accuracy benchmarks.
+    #[arg(long, default_value_t = 30, value_name = "N")]
+    pub frames: usize,
     /// Print one JSON object instead of a table.
     #[arg(long)]
     pub json: bool,
+}
+
+/// Run a side-by-side Python script under scripts/ and parse its one JSON object.
+fn python_figures(python: &str, script: &str, args: &[String]) -> serde_json::Value {
+    let path = concat!(env!("CARGO_MANIFEST_DIR"), "/scripts/").to_string() + script;
+    match std::process::Command::new(python).arg(&path).args(args).output() {
+        Ok(o) if o.status.success() => serde_json::from_slice(&o.stdout).unwrap_or_else(
+            |e| serde_json::json!({ "error": format!("{script} printed no JSON object: {e}") }),
+        ),
+        Ok(o) => {
+            serde_json::json!({ "error": String::from_utf8_lossy(&o.stderr).trim().to_string() })
+        }
+        Err(e) => serde_json::json!({ "error": format!("cannot run {python}: {e}") }),
+    }
 }
 
 fn venv_python() -> Option<String> {
@@ -53,7 +89,58 @@ pub fn run(args: BenchArgs) -> u8 {
         eprintln!("hitl bench: --rate must be within 50-1000 Hz");
         return exit::BAD_INPUT;
     }
+    let Some((width, height)) = args
+        .size
+        .split_once('x')
+        .and_then(|(w, h)| Some((w.parse::<u32>().ok()?, h.parse::<u32>().ok()?)))
+    else {
+        eprintln!("hitl bench: --size must be WIDTHxHEIGHT, e.g. 320x256");
+        return exit::BAD_INPUT;
+    };
+    let python = venv_python().unwrap_or_else(|| "python3".into());
     let figures = match args.which {
+        Which::Npz => {
+            let rust = hitl_trajectories::bench::bench_npz(100_000);
+            let dir = hitl_trajectories::bench::bench_dir();
+            let files: Vec<String> = ["stored", "deflated"]
+                .iter()
+                .map(|k| dir.join(format!("traj-100000-{k}.npz")).display().to_string())
+                .collect();
+            let numpy = python_figures(&python, "bench_npz.py", &files);
+            serde_json::json!({ "bench": "npz", "hitl": rust, "numpy": numpy })
+        }
+        Which::Ik => hitl_trajectories::planner::bench::bench_ik(3600),
+        #[cfg(feature = "stub")]
+        Which::Protocol => {
+            let lab = hitl_trajectories::lab::LabConfig::default();
+            match hitl_sim_stub::mujoco_plant::MujocoPlant::new(&lab, None) {
+                Ok(plant) => hitl_sim_stub::bench_protocol(Box::new(plant), Default::default())
+                    .unwrap_or_else(|e| serde_json::json!({ "error": e.to_string() })),
+                Err(e) => serde_json::json!({ "error": e.to_string() }),
+            }
+        }
+        #[cfg(feature = "stub")]
+        Which::Render => hitl_sim_stub::camera::bench_render(),
+        #[cfg(not(feature = "stub"))]
+        Which::Protocol | Which::Render => {
+            eprintln!("hitl bench: this build has no stub");
+            return exit::BAD_INPUT;
+        }
+        Which::Record => {
+            let rust = hitl_record::bench::bench_record(args.seconds);
+            let secs = args.seconds.to_string();
+            let numpy =
+                python_figures(&python, "bench_record_numpy.py", &["--seconds".into(), secs]);
+            serde_json::json!({ "bench": "record", "hitl": rust, "numpy_savez_compressed": numpy })
+        }
+        Which::Tracker => hitl_perception::bench::bench_tracker(width, height, args.frames),
+        Which::Accuracy => hitl_perception::bench::bench_accuracy(
+            &[5.0, 10.0, 25.0, 50.0],
+            width,
+            height,
+            args.frames,
+            0.077,
+        ),
         Which::Loop => loop_timing::run(&LoopBenchOptions {
             seconds: args.seconds,
             rate_hz: args.rate,
