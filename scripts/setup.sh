@@ -65,12 +65,13 @@ ln -sf "libOrbbecSDK.so.$ORBBEC_SDK_VERSION" "$LIB/libOrbbecSDK.so.2"
 
 # --- Python venv with the test peers --------------------------------------------------------
 VENV="$ROOT/.venv"
-STAMP="$VENV/.hitl-peers-v1"
-if [ ! -f "$STAMP" ]; then
-  say "creating Python venv with test peers in .venv"
-  python3 -m venv "$VENV"
+STAMP="$VENV/.hitl-peers"
+WANT=$(sha256sum "$ROOT/scripts/requirements-test.txt" | cut -d' ' -f1)
+if [ ! -x "$VENV/bin/python" ] || [ "$(cat "$STAMP" 2>/dev/null)" != "$WANT" ]; then
+  say "installing the Python test peers into .venv (scripts/requirements-test.txt)"
+  [ -x "$VENV/bin/python" ] || python3 -m venv "$VENV"
   "$VENV/bin/pip" install --quiet --upgrade pip
   "$VENV/bin/pip" install --quiet -r "$ROOT/scripts/requirements-test.txt"
-  touch "$STAMP"
+  echo "$WANT" > "$STAMP"
 fi
 say "ready (.deps/lib, .venv)"
