@@ -79,7 +79,8 @@ def pose_error(chain, q7, target):
     got = chain.forward_kinematics(full)
     dp = np.linalg.norm(got[:3, 3] - target[:3, 3])
     r = got[:3, :3].T @ target[:3, :3]
-    ang = np.degrees(np.arccos(np.clip((np.trace(r) - 1.0) / 2.0, -1.0, 1.0)))
+    # The rotation vector's length: exact near zero, unlike arccos of the trace.
+    ang = np.degrees(Rotation.from_matrix(r).magnitude())
     return dp, ang
 
 

@@ -51,8 +51,8 @@ impl Default for IkOptions {
     fn default() -> Self {
         Self {
             limit_margin_rad: 0.05,
-            pos_tol_m: 1e-8,
-            rot_tol_rad: 1e-8,
+            pos_tol_m: 1e-10,
+            rot_tol_rad: 1e-10,
             max_iters: 200,
             null_steps: 2,
             null_gain: 0.05,
