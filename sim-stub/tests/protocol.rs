@@ -229,3 +229,37 @@ fn refuses_a_non_loopback_bind() {
         Ok(_) => panic!("must refuse 0.0.0.0 without allow_remote"),
     }
 }
+
+#[test]
+fn rust_client_against_the_mujoco_stub_reads_back_and_hits_the_wall() {
+    use hitl_sim_stub::mujoco_plant::MujocoPlant;
+    use hitl_trajectories::lab::LabConfig;
+    use std::f64::consts::{FRAC_PI_2, PI};
+    // Arm stretched out horizontally towards the far end (the plant's own wall scenario).
+    let start_q = [PI, 1.4167, 0.0, 2.81, 0.0, 0.5467, 0.0];
+    let plant = MujocoPlant::new(&LabConfig::default(), None).expect("MuJoCo lab plant");
+    let config = StubConfig { initial_q: start_q, ..StubConfig::ephemeral() };
+    let stub = Stub::start(config, Box::new(plant)).expect("stub starts");
+    let mut arm = client(&stub);
+    let mut reports = reader(&stub);
+    arm.enable_servo().expect("enables");
+    let mut q1 = start_q;
+    q1[0] += 0.2;
+    q1[5] += 0.1;
+    stream(&mut arm, &start_q, &q1, 150).expect("stream accepted");
+    std::thread::sleep(Duration::from_millis(500));
+    assert_close(&arm.joint_positions().expect("joints"), &q1, 2e-3);
+    let r = fresh_report(&mut reports, Duration::from_millis(50));
+    assert_close(&r.q, &q1, 2e-3);
+    assert_eq!((r.state, r.mode, r.error_code), (2, 1, 0));
+    // Turn joint 1 into the side wall: the box raises error 31 and stops.
+    let mut wall = q1;
+    wall[0] = PI + FRAC_PI_2;
+    assert!(stream(&mut arm, &q1, &wall, 500).is_err(), "the wall must stop the stream");
+    assert_eq!(arm.codes().expect("codes"), (codes::ERR_COLLISION, 0));
+    let c = stub.with_box(|b| b.last_collision.clone()).expect("collision recorded");
+    assert!(c.other.starts_with("wall"), "{c:?}");
+    let r = fresh_report(&mut reports, Duration::from_millis(300));
+    assert_eq!((r.state, r.error_code), (4, codes::ERR_COLLISION));
+    stub.shutdown();
+}
