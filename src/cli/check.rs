@@ -155,11 +155,11 @@ fn human(path: &Path, c: &Checked) -> String {
             j.step_limit_rad * 1e3,
         );
     }
-    let _ = writeln!(s, "  clearance               min [m]  required  closest   at");
+    let _ = writeln!(s, "  clearance               min [m]  required  closest    at");
     for cl in &r.clearances {
         let _ = writeln!(
             s,
-            "  {:<22} {:>8.3}  {:>8.3}  {:<8}  {:.3} s (tick {})",
+            "  {:<22} {:>8.3}  {:>8.3}  {:<9}  {:.3} s (tick {})",
             cl.surface, cl.min_m, cl.required_m, cl.capsule, cl.time_s, cl.tick
         );
     }

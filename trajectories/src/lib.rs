@@ -7,8 +7,10 @@
 //! - [`geometry`]: capsules, segment distances, clearances;
 //! - [`lab`]: the lab configuration (enclosure, arm base, keep-outs, camera mount, limits);
 //! - [`preflight`]: the `hitl check` rules;
+//! - [`bench`]: the NPZ load and time-parametrisation benchmark;
 //! - [`orbit`], [`ik`], [`planner`]: the orbital planner that writes NPZ presets.
 
+pub mod bench;
 pub mod geometry;
 pub mod ik;
 pub mod kinematics;

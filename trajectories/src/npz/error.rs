@@ -11,7 +11,7 @@ pub enum NpzError {
     #[error("cannot write {path}: {source}")]
     Write { path: String, source: std::io::Error },
     /// The bytes are not a zip archive (an NPZ is one), or its directory is damaged.
-    #[error("not an NPZ file (not a readable zip archive): {detail}")]
+    #[error("not an NPZ file, or truncated: no readable zip archive ({detail})")]
     NotZip { detail: String },
     /// An entry's bytes could not be read in full: the file is truncated or corrupt.
     #[error("key '{key}': cannot read its bytes (truncated or corrupt file): {detail}")]

@@ -1,0 +1,226 @@
+//! `hitl check` end to end: the binary on NPZ files written by real numpy (and by hitl), each bad
+//! input getting exit 2 with a message naming the problem, unsafe motion exit 3, safe exit 0.
+
+use std::path::{Path, PathBuf};
+use std::process::Command;
+use std::sync::OnceLock;
+
+/// Writes every fixture with numpy into the folder given as argv[1].
+const FIXTURES_PY: &str = r#"
+import json, os, struct, sys, zipfile
+import numpy as np
+
+out = sys.argv[1]
+LOOK = np.array([0.0, -0.4, 0.0, 1.4, 0.0, 1.5, 0.0])
+
+def smooth(n=21, span=4.0, amp=0.1):
+    t = np.linspace(0.0, span, n)
+    bump = np.sin(np.pi * t / span) ** 2
+    q = LOOK[None, :] + amp * bump[:, None] * (1.0 + np.arange(7)[None, :] / 7.0)
+    return t, q
+
+def save(name, compressed=False, **arrays):
+    (np.savez_compressed if compressed else np.savez)(os.path.join(out, name), **arrays)
+
+t, q = smooth()
+capture = np.zeros(len(t), dtype=bool); capture[::5] = True
+light = np.linspace(0.2, 1.0, len(t)).astype(np.float32)
+meta = np.array(json.dumps({"preset": "test", "scale": 1.0}))
+save("safe.npz", qpos=q, t=t, capture=capture, light=light, meta=meta)
+save("safe_f32_fortran.npz", compressed=True, qpos=np.asfortranarray(q.astype(np.float32)), t=t,
+     extra_key=np.arange(3.0))
+
+bad = q.copy(); bad[3, 2] = np.nan; save("nan.npz", qpos=bad, t=t)
+bt = t.copy(); bt[5] = np.inf; save("inf_t.npz", qpos=q, t=bt)
+save("width6.npz", qpos=q[:, :6], t=t)
+bt = t.copy(); bt[2] = bt[1]; save("t_flat.npz", qpos=q, t=bt)
+save("one.npz", qpos=q[:1], t=t[:1])
+save("no_qpos.npz", t=t)
+save("no_t.npz", qpos=q)
+save("short_capture.npz", qpos=q, t=t, capture=capture[:-1])
+bl = light.copy(); bl[4] = 1.5; save("light_high.npz", qpos=q, t=t, light=bl)
+save("int_qpos.npz", qpos=np.round(q * 1000).astype(np.int64), t=t)
+save("complex_t.npz", qpos=q, t=t.astype(np.complex128))
+np.savez(os.path.join(out, "object.npz"), qpos=np.array([list(r) for r in q] + [None], dtype=object)[:-1], t=t)
+np.savez(os.path.join(out, "object_meta.npz"), qpos=q, t=t, meta=np.array({"a": 1}, dtype=object))
+
+# A header declaring 10^12 waypoints over 16 bytes of data.
+header = "{'descr': '<f8', 'fortran_order': False, 'shape': (1000000000000, 7), }"
+header += " " * ((64 - (10 + len(header) + 1) % 64) % 64) + "\n"
+npy = b"\x93NUMPY\x01\x00" + struct.pack("<H", len(header)) + header.encode() + b"\0" * 16
+with zipfile.ZipFile(os.path.join(out, "huge.npz"), "w") as z:
+    z.writestr("qpos.npy", npy)
+    z.writestr("t.npy", b"")
+
+data = open(os.path.join(out, "safe.npz"), "rb").read()
+open(os.path.join(out, "truncated.npz"), "wb").write(data[: len(data) // 2])
+open(os.path.join(out, "not_zip.npz"), "w").write("qpos,t\n0,0\n")
+
+# Joint 4 pushed below its lower limit (-0.19 rad) in the middle.
+bq = q.copy(); bq[8:13, 3] = -0.3; save("joint4_low.npz", qpos=bq, t=t)
+# One rest-to-rest move of joint 1 by 0.5 rad in 1 s: 0.94 rad/s peak, inside the velocity limit,
+# but 0.019 rad per tick at 50 Hz (limit 0.01).
+q2 = np.stack([LOOK, LOOK]); q2[1, 0] += 0.5
+save("fast_step.npz", qpos=q2, t=np.array([0.0, 1.0]))
+"#;
+
+fn python() -> PathBuf {
+    let p = PathBuf::from(env!("HITL_VENV_PYTHON"));
+    assert!(p.exists(), "{} is missing: run make setup", p.display());
+    p
+}
+
+/// The fixture folder, written once per test binary.
+fn fixtures() -> &'static Path {
+    static DIR: OnceLock<PathBuf> = OnceLock::new();
+    DIR.get_or_init(|| {
+        let dir = std::env::temp_dir().join(format!("hitl-check-cli-{}", std::process::id()));
+        std::fs::create_dir_all(&dir).expect("temp dir");
+        let out = Command::new(python())
+            .arg("-c")
+            .arg(FIXTURES_PY)
+            .arg(&dir)
+            .output()
+            .expect("run the venv python (run make setup)");
+        assert!(out.status.success(), "fixtures: {}", String::from_utf8_lossy(&out.stderr));
+        dir
+    })
+}
+
+struct Outcome {
+    code: i32,
+    text: String,
+}
+
+fn check(file: &str, extra: &[&str]) -> Outcome {
+    let path = fixtures().join(file);
+    let out = Command::new(env!("CARGO_BIN_EXE_hitl"))
+        .arg("check")
+        .arg(&path)
+        .args(extra)
+        .output()
+        .expect("run hitl");
+    let text =
+        format!("{}{}", String::from_utf8_lossy(&out.stdout), String::from_utf8_lossy(&out.stderr));
+    assert!(!text.contains("panicked"), "hitl panicked on {file}: {text}");
+    Outcome { code: out.status.code().unwrap_or(-1), text }
+}
+
+/// Exit code `code` and every one of `words` in the output.
+fn expect(file: &str, extra: &[&str], code: i32, words: &[&str]) {
+    let o = check(file, extra);
+    assert_eq!(o.code, code, "{file} {extra:?}: {}", o.text);
+    for w in words {
+        assert!(o.text.contains(w), "{file}: expected '{w}' in: {}", o.text);
+    }
+}
+
+#[test]
+fn a_safe_trajectory_passes_with_its_report() {
+    expect(
+        "safe.npz",
+        &[],
+        0,
+        &["SAFE", "21 waypoints", "4.000 s", "1001 ticks at 250 Hz", "5 capture(s)", "floor"],
+    );
+    // float32, Fortran order, compressed, an unknown key warned about.
+    expect("safe_f32_fortran.npz", &[], 0, &["SAFE", "unknown key 'extra_key.npy' ignored"]);
+}
+
+#[test]
+fn json_report_is_one_object() {
+    let o = check("safe.npz", &["--json", "--rate", "500", "--speed-scale", "0.5"]);
+    assert_eq!(o.code, 0, "{}", o.text);
+    let v: serde_json::Value = serde_json::from_str(o.text.trim()).expect("one JSON object");
+    assert_eq!(v["safe"], true);
+    assert_eq!(v["rate_hz"], 500.0);
+    assert_eq!(v["ticks"], 4001);
+    assert_eq!(v["joints"].as_array().map(Vec::len), Some(7));
+    assert_eq!(v["clearances"].as_array().map(Vec::len), Some(10));
+    let o = check("nan.npz", &["--json"]);
+    assert_eq!(o.code, 2);
+    let first = o.text.lines().next().unwrap_or_default();
+    let v: serde_json::Value = serde_json::from_str(first).expect("error object");
+    assert!(v["error"].as_str().unwrap_or_default().contains("qpos"), "{v}");
+}
+
+#[test]
+fn non_finite_values_name_key_and_waypoint() {
+    expect("nan.npz", &[], 2, &["'qpos'", "waypoint 3", "joint 3", "not finite"]);
+    expect("inf_t.npz", &[], 2, &["'t'", "waypoint 5", "not finite"]);
+}
+
+#[test]
+fn shape_and_count_problems_are_named() {
+    expect("width6.npz", &[], 2, &["'qpos'", "shape [21, 6]", "(N, 7)"]);
+    expect("one.npz", &[], 2, &["'qpos'", "1 waypoint", "at least 2"]);
+    expect("no_qpos.npz", &[], 2, &["'qpos' is missing"]);
+    expect("no_t.npz", &[], 2, &["'t' is missing"]);
+    expect("short_capture.npz", &[], 2, &["'capture'", "20 waypoints", "'qpos' has 21"]);
+}
+
+#[test]
+fn time_must_increase_strictly() {
+    expect("t_flat.npz", &[], 2, &["'t'", "waypoint 2", "increase strictly"]);
+}
+
+#[test]
+fn light_outside_unit_range_is_refused() {
+    expect("light_high.npz", &[], 2, &["'light'", "waypoint 4", "outside [0, 1]"]);
+}
+
+#[test]
+fn refused_dtypes_are_named() {
+    expect("int_qpos.npz", &[], 2, &["'qpos'", "integer"]);
+    expect("complex_t.npz", &[], 2, &["'t'", "complex"]);
+    expect("object.npz", &[], 2, &["'qpos'", "pickled"]);
+    expect("object_meta.npz", &[], 2, &["'meta'", "pickled"]);
+}
+
+#[test]
+fn damaged_files_are_refused() {
+    expect("huge.npz", &[], 2, &["'qpos'", "1000000000000", "declares shape"]);
+    expect("truncated.npz", &[], 2, &["truncated"]);
+    expect("not_zip.npz", &[], 2, &["not an NPZ file"]);
+    expect("does_not_exist.npz", &[], 2, &["cannot read", "does_not_exist.npz"]);
+}
+
+#[test]
+fn a_joint_beyond_its_limit_is_unsafe() {
+    expect("joint4_low.npz", &[], 3, &["UNSAFE", "joint 4", "allowed range"]);
+}
+
+#[test]
+fn a_step_too_large_for_the_rate_is_unsafe() {
+    expect("fast_step.npz", &["--rate", "50"], 3, &["UNSAFE", "joint 1 step", "50 Hz"]);
+    // The same motion at 250 Hz steps 4 mrad per tick.
+    expect("fast_step.npz", &[], 0, &["SAFE"]);
+}
+
+#[test]
+fn bad_flags_and_config_are_bad_input() {
+    expect("safe.npz", &["--rate", "20"], 2, &["50-1000 Hz"]);
+    expect("safe.npz", &["--speed-scale", "0"], 2, &["speed scale"]);
+    expect("safe.npz", &["--speed-scale", "fast"], 2, &["speed-scale"]);
+    let cfg = fixtures().join("bad.toml");
+    std::fs::write(&cfg, "[limits]\nvelocity_rad_s = [9.0, 1, 1, 1, 1, 1, 1]\n").expect("write");
+    let cfg = cfg.display().to_string();
+    expect("safe.npz", &["--config", &cfg], 2, &["velocity_rad_s[0]"]);
+}
+
+#[test]
+fn a_config_changes_the_verdict() {
+    // A lab with a tighter velocity limit refuses the same file.
+    let cfg = fixtures().join("slow.toml");
+    std::fs::write(&cfg, "[limits]\nvelocity_rad_s = [0.05, 1, 1, 1, 1, 1, 1]\n").expect("write");
+    let cfg = cfg.display().to_string();
+    expect("safe.npz", &["--config", &cfg], 3, &["joint 1 velocity", "exceeds the limit 0.05"]);
+}
+
+#[test]
+fn a_file_hitl_writes_checks_like_numpys() {
+    let numpy = hitl_trajectories::npz::load(&fixtures().join("safe.npz")).expect("load");
+    let ours = fixtures().join("ours.npz");
+    hitl_trajectories::npz::save(&ours, &numpy.trajectory, true).expect("save");
+    expect("ours.npz", &[], 0, &["SAFE", "21 waypoints"]);
+}
