@@ -45,6 +45,7 @@ def main():
     os.makedirs(out, exist_ok=True)
     n, size = 0, 0
     t0 = time.perf_counter()
+    c0 = time.process_time()
     while True:
         p = os.path.join(out, f"depth_{n:06d}.npz")
         np.savez_compressed(p, depth=frames[n % len(frames)])
@@ -54,6 +55,7 @@ def main():
         if (a.frames and n >= a.frames) or (not a.frames and el >= a.seconds):
             break
     el = time.perf_counter() - t0
+    cpu = time.process_time() - c0
     if a.out is None:
         shutil.rmtree(out, ignore_errors=True)
     print(json.dumps({
@@ -61,6 +63,8 @@ def main():
         "frames": n,
         "seconds": el,
         "frames_per_s": n / el,
+        "cpu_s": cpu,
+        "frames_per_cpu_s": n / cpu if cpu > 0 else None,
         "depth_mb_per_s": n * W * H * 2 / 1e6 / el,
         "file_kb_per_frame": size / n / 1e3,
         "numpy": np.__version__,

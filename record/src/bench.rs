@@ -52,6 +52,19 @@ pub fn synthetic_color(k: u32) -> Vec<u8> {
     v
 }
 
+/// CPU seconds this process has used (user + system), from /proc (Linux); `None` elsewhere.
+/// On a shared machine, frames per CPU second compares writers fairly where wall time cannot.
+pub fn process_cpu_s() -> Option<f64> {
+    let stat = std::fs::read_to_string("/proc/self/stat").ok()?;
+    // Fields after the command name (which is in parentheses and may hold spaces).
+    let rest = &stat[stat.rfind(')')? + 2..];
+    let f: Vec<&str> = rest.split_whitespace().collect();
+    let utime: f64 = f.get(11)?.parse().ok()?;
+    let stime: f64 = f.get(12)?.parse().ok()?;
+    // USER_HZ is 100 on Linux for every architecture Rust targets here.
+    Some((utime + stime) / 100.0)
+}
+
 /// One run of the benchmark.
 #[derive(Debug, Clone)]
 pub struct BenchOptions {
@@ -113,6 +126,7 @@ pub fn run_bench(opts: &BenchOptions) -> Result<serde_json::Value, crate::Record
         std::env::temp_dir().join(format!("hitl-bench-record-{}.mcap", std::process::id()))
     });
     let (handle, tel) = Recorder::spawn_with(&path, &RunMetadata::default(), opts.config)?;
+    let cpu0 = process_cpu_s();
     let start = Instant::now();
     let period = Duration::from_secs_f64(1.0 / opts.telemetry_hz.max(1.0));
     let frame_period = Duration::from_secs_f64(1.0 / opts.fps.max(0.1));
@@ -171,6 +185,7 @@ pub fn run_bench(opts: &BenchOptions) -> Result<serde_json::Value, crate::Record
     let not_recorded = tel.frames_not_recorded();
     let summary = handle.finish();
     let elapsed = start.elapsed().as_secs_f64();
+    let cpu_s = process_cpu_s().zip(cpu0).map(|(b, a)| b - a);
     let summary = match summary {
         Ok(s) => s,
         Err(e) => {
@@ -200,6 +215,8 @@ pub fn run_bench(opts: &BenchOptions) -> Result<serde_json::Value, crate::Record
         "file_mb": summary.file_bytes as f64 / mb,
         "compression_ratio": summary.bytes_in as f64 / (summary.file_bytes.max(1) as f64),
         "drain_after_push_s": elapsed - pushing_s,
+        "cpu_s": cpu_s,
+        "frames_per_cpu_s": cpu_s.filter(|c| *c > 0.0).map(|c| frames as f64 / c),
     }))
 }
 
