@@ -233,7 +233,7 @@ pub fn bench_record(seconds: f64) -> serde_json::Value {
     serde_json::json!({
         "benchmark": "record",
         "frames": format!("depth {DEPTH_W}x{DEPTH_H} 16UC1 + color {COLOR_W}x{COLOR_H} rgb8"),
-        "compression": "zstd level 1",
+        "compression": format!("{:?}", RecorderConfig::default().compression),
         "cores": std::thread::available_parallelism().map(|n| n.get()).unwrap_or(1),
         "paced": p,
         "max_rate": m,
