@@ -172,7 +172,7 @@ fn depth_as_16uc1_millimetres() {
     let path = dir.path().join("mm.mcap");
     let cfg = RecorderConfig {
         depth_output: DepthOutput::Millimetres16,
-        compression: ChunkCompression::Lz4,
+        compression: ChunkCompression::Zstd(1),
         ..Default::default()
     };
     write_run(&path, cfg);
