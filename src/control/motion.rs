@@ -64,11 +64,9 @@ fn sample_into(
     for (i, slot) in out.iter_mut().take(steps).enumerate() {
         let t = ((i + 1) as f64 * dt).min(duration);
         let (p, v, a) = trajectory.at_time(t);
-        for j in 0..7 {
-            slot.q[j] = p[j];
-            slot.qd[j] = v[j];
-            slot.qdd[j] = a[j];
-        }
+        slot.q.copy_from_slice(&p);
+        slot.qd.copy_from_slice(&v);
+        slot.qdd.copy_from_slice(&a);
     }
     Ok(steps)
 }
@@ -145,9 +143,9 @@ mod tests {
         assert_eq!(path.last().expect("samples").q, to);
         let mut prev = from;
         for sp in &path {
-            for j in 0..7 {
+            for (j, p) in prev.iter().enumerate() {
                 assert!(sp.qd[j].abs() <= 0.3 + 1e-6, "velocity {}", sp.qd[j]);
-                assert!((sp.q[j] - prev[j]).abs() <= 0.3 * 0.004 + 1e-6);
+                assert!((sp.q[j] - p).abs() <= 0.3 * 0.004 + 1e-6);
             }
             prev = sp.q;
         }

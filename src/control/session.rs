@@ -716,10 +716,7 @@ pub fn run(req: RunRequest) -> Result<RunReport, RunError> {
             ),
         ));
     }
-    let record_summary = match recorder {
-        Some((handle, _)) => Some(handle.finish().map_err(|e| e.to_string())),
-        None => None,
-    };
+    let record_summary = recorder.map(|(handle, _)| handle.finish().map_err(|e| e.to_string()));
 
     #[cfg(feature = "stub")]
     let stub_final_q = stub.map(|s| {
