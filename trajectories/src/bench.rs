@@ -149,4 +149,12 @@ mod tests {
         assert!(v["files"]["deflated"]["bytes"].as_u64() < v["files"]["stored"]["bytes"].as_u64());
         let _ = std::fs::remove_dir_all(dir);
     }
+
+    /// The real benchmark, run by hand (release build), not in CI:
+    /// `cargo test -p hitl-trajectories --release --lib bench::tests::figures -- --ignored --nocapture`
+    #[test]
+    #[ignore = "benchmark: run by hand in release"]
+    fn figures() {
+        println!("{}", bench_npz(100_000));
+    }
 }

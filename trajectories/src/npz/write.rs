@@ -85,16 +85,21 @@ impl<W: Write + Seek> Entries<'_, W> {
         self.begin(key)?;
         let encode =
             |e: std::io::Error| NpzError::Encode { key: key.into(), detail: e.to_string() };
+        // Encode into memory first, then hand the zip layer one buffer: millions of 8-byte writes
+        // into the deflate stream cost more than the compression.
+        let elements = shape.iter().product::<u64>() as usize;
+        let mut buf = Vec::with_capacity(128 + elements * 8);
         let mut npy = WriteOptions::<T>::new()
             .dtype(dtype(descr, key)?)
             .shape(shape)
-            .writer(&mut *self.zip)
+            .writer(&mut buf)
             .begin_nd()
             .map_err(encode)?;
         for v in values {
             npy.push(v).map_err(encode)?;
         }
-        npy.finish().map_err(encode)
+        npy.finish().map_err(encode)?;
+        self.zip.write_all(&buf).map_err(encode)
     }
 }
 
