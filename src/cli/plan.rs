@@ -213,6 +213,21 @@ pub fn run(args: PlanArgs) -> u8 {
         for v in &report.violations {
             eprintln!("  {}", v.message);
         }
+        // Too fast for the lab's speed limits: say how long the plan would have to last.
+        let ratio = plan
+            .summary
+            .peak_joint_speed_rad_s
+            .iter()
+            .zip(lab.limits.velocity_rad_s)
+            .map(|(v, lim)| v / lim)
+            .fold(0.0, f64::max);
+        if ratio > 0.9 {
+            let longer = (plan.summary.duration_s * ratio / 0.8).ceil();
+            eprintln!(
+                "  the waypoints alone reach {:.0} % of the speed limit: try --duration-s {longer}",
+                ratio * 100.0
+            );
+        }
         return exit::PREFLIGHT_REFUSED;
     }
     let out = args
