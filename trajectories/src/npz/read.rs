@@ -73,7 +73,9 @@ pub fn read_archive<R: Read + Seek>(
                 ),
             });
         }
-        let mut bytes = Vec::with_capacity(size as usize);
+        // Reserve what the directory declares, up to 16 MiB; beyond that the buffer grows only as
+        // real bytes arrive, so a tiny file declaring huge entries allocates little.
+        let mut bytes = Vec::with_capacity(size.min(16 << 20) as usize);
         (&mut entry)
             .take(size)
             .read_to_end(&mut bytes)
