@@ -390,11 +390,13 @@ mod tests {
 
     #[test]
     fn refuses_unknown_keys_and_bad_values() {
-        let e = LabConfig::from_toml("[limits]\nvelocity = 1.0\n").unwrap_err();
+        let e = LabConfig::from_toml("[limits]\nvelocity = 1.0\n").expect_err("refused");
         assert!(e.to_string().contains("velocity"), "{e}");
-        let e = LabConfig::from_toml("[limits]\nvelocity_rad_s = [4.0,1,1,1,1,1,1]\n").unwrap_err();
+        let e = LabConfig::from_toml("[limits]\nvelocity_rad_s = [4.0,1,1,1,1,1,1]\n")
+            .expect_err("refused");
         assert!(e.to_string().contains("velocity_rad_s[0]"), "{e}");
-        let e = LabConfig::from_toml("[arm]\nbase_in_lab_m = [5.0, 0.5, 0.0]\n").unwrap_err();
+        let e =
+            LabConfig::from_toml("[arm]\nbase_in_lab_m = [5.0, 0.5, 0.0]\n").expect_err("refused");
         assert!(e.to_string().contains("outside the enclosure"), "{e}");
     }
 
