@@ -6,4 +6,8 @@ pub mod eval;
 pub mod plan;
 pub mod report;
 pub mod run;
+#[cfg(feature = "stub")]
+pub mod stub;
+#[cfg(not(feature = "stub"))]
+#[path = "stub_absent.rs"]
 pub mod stub;
