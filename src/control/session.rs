@@ -500,7 +500,7 @@ fn start_recorder(
         lab_config: req.lab.to_toml(),
         versions,
         scale: Some(scale),
-        extra: Default::default(),
+        extra: [("target_model".to_string(), req.target_model.clone())].into(),
         sun_phase: traj.sun_phase_deg.as_ref().map(|deg| SunPhaseTrack {
             t_s: traj.t.iter().map(|t| t / req.speed_scale).collect(),
             sun_phase_deg: deg.clone(),
