@@ -513,6 +513,9 @@ fn start_recorder(
 
 /// Play `req` and say how it ended.
 pub fn run(req: RunRequest) -> Result<RunReport, RunError> {
+    // Ctrl-C from the very start: during setup it stops the run at its first tick, with no motion.
+    let operator_stop = Arc::new(AtomicBool::new(false));
+    install_ctrlc(&operator_stop);
     let (traj, table) = prepare(&req)?;
     let scene = target_scene(&req, &traj)?;
     let backend: BackendSpec =
@@ -646,8 +649,11 @@ pub fn run(req: RunRequest) -> Result<RunReport, RunError> {
         approach,
     };
 
-    let health =
-        Health { recorder: recorder.as_ref().map(|(h, _)| h.health()), ..Health::default() };
+    let health = Health {
+        operator_stop,
+        recorder: recorder.as_ref().map(|(h, _)| h.health()),
+        ..Health::default()
+    };
     let status = Arc::new(LoopStatus::default());
     let limits = &req.lab.limits;
     let stop_limits = MoveLimits {
@@ -658,7 +664,6 @@ pub fn run(req: RunRequest) -> Result<RunReport, RunError> {
     let (planner, stop) = StopPlanner::start(stop_limits, table.dt, 10.0)
         .map_err(|e| RunError::Device(format!("stop planner thread: {e}")))?;
     let interlocks = Interlocks::new(Thresholds::from_lab(&req.lab));
-    install_ctrlc(&health);
     let io = LoopIo {
         reports,
         telemetry: RunTelemetry {
@@ -795,8 +800,8 @@ fn connect_reports(
 }
 
 /// Ctrl-C asks for a controlled stop; a second Ctrl-C is left to the default (ends the process).
-fn install_ctrlc(health: &Health) {
-    let flag = Arc::clone(&health.operator_stop);
+fn install_ctrlc(operator_stop: &Arc<AtomicBool>) {
+    let flag = Arc::clone(operator_stop);
     let _ = ctrlc::set_handler(move || {
         if flag.swap(true, Ordering::AcqRel) {
             std::process::exit(i32::from(exit::OPERATOR_STOP));
