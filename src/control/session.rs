@@ -289,7 +289,6 @@ fn spawn_report_reader(
         while !stop.load(Ordering::Acquire) {
             match reader.next_report() {
                 Ok(state) => slot.publish(state),
-                Err(_) if stop.load(Ordering::Acquire) => break,
                 Err(_) => break,
             }
         }
@@ -691,7 +690,11 @@ pub fn run(req: RunRequest) -> Result<RunReport, RunError> {
                 let control = ControlLoop::new(program, devices, io, interlocks, rate, &start_q);
                 let (outcome, mut devices) = control.run(rt_options.spin);
                 let _ = devices.arm.flush_servo_replies();
-                collect_late_frames(&mut devices.camera, &late_frames, captures_fired(&status_rt));
+                collect_late_frames(
+                    &mut devices.camera,
+                    &late_frames,
+                    status_rt.captures.load(Ordering::Acquire),
+                );
                 (outcome, rt_report)
             })
             .map_err(|e| RunError::Device(format!("real-time thread: {e}")))?;
@@ -758,10 +761,6 @@ pub fn run(req: RunRequest) -> Result<RunReport, RunError> {
         estimates: estimates_forwarded,
         record_error: record_summary.and_then(|r| r.err()),
     })
-}
-
-fn captures_fired(status: &LoopStatus) -> u64 {
-    status.captures.load(Ordering::Acquire)
 }
 
 /// After the loop: frames for the last captures may still be on their way; hand them to the

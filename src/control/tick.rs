@@ -53,8 +53,6 @@ impl Program {
 pub struct Health {
     /// Ctrl-C.
     pub operator_stop: Arc<AtomicBool>,
-    /// The recorder cannot write (raised by hand, e.g. in tests).
-    pub recorder_failed: Arc<AtomicBool>,
     /// The recorder's own health flag, when the run records.
     pub recorder: Option<hitl_record::RecorderHealth>,
     /// A device failed outside the tick (frame intake, serial task): 0 none, else `Device` + 1.
@@ -215,8 +213,7 @@ where
                 commanded: &self.last_sent.q,
                 inputs,
                 operator_stop: self.health.operator_stop.load(Ordering::Relaxed),
-                recorder_failed: self.health.recorder_failed.load(Ordering::Relaxed)
-                    || self.health.recorder.as_ref().is_some_and(|r| r.is_failed()),
+                recorder_failed: self.health.recorder.as_ref().is_some_and(|r| r.is_failed()),
                 device_failed: self.device_failed.or_else(|| self.health.failed_device()),
                 check_deviation: true,
             };
