@@ -55,6 +55,10 @@ fn run_with(extra: &[&str]) -> Run {
     run_with_camera("none", extra)
 }
 
+/// The lab these runs use: the default one with a watchdog a shared VM cannot trip by itself
+/// (the file says why). The stall-reports case keeps the default watchdog.
+const SHARED_VM_LAB: &str = concat!(env!("CARGO_MANIFEST_DIR"), "/tests/data/shared-vm-lab.toml");
+
 fn run_with_camera(camera: &str, extra: &[&str]) -> Run {
     let dir = tempfile::tempdir().expect("tempdir");
     let traj = numpy_trajectory(dir.path());
@@ -70,6 +74,9 @@ fn run_with_camera(camera: &str, extra: &[&str]) -> Run {
         "sim",
         "--plain",
     ];
+    if !extra.iter().any(|a| a.starts_with("stall-reports")) {
+        args.extend_from_slice(&["--config", SHARED_VM_LAB]);
+    }
     args.extend_from_slice(extra);
     let out = hitl(&args);
     Run { out, mcap, _dir: dir, traj }
@@ -188,7 +195,7 @@ fn ctrl_c_takes_a_controlled_stop_and_exits_130() {
     let child = Command::new(env!("CARGO_BIN_EXE_hitl"))
         .args(["run", traj.to_str().expect("utf-8"), "--record"])
         .arg(&mcap)
-        .args(["--camera", "none", "--light", "sim", "--plain"])
+        .args(["--camera", "none", "--light", "sim", "--plain", "--config", SHARED_VM_LAB])
         .stdin(Stdio::null())
         .stdout(Stdio::piped())
         .stderr(Stdio::piped())
@@ -216,10 +223,11 @@ fn a_recorder_that_cannot_write_trips_the_interlock_and_leaves_a_readable_file()
     // write fails with EFBIG instead of killing the process.
     let script = format!(
         "trap '' XFSZ; ulimit -f 96; exec '{}' run '{}' --record '{}' --camera sim \
-         --camera-size 320x256 --light sim --plain",
+         --camera-size 320x256 --light sim --plain --config '{}'",
         env!("CARGO_BIN_EXE_hitl"),
         traj.display(),
-        mcap.display()
+        mcap.display(),
+        SHARED_VM_LAB
     );
     let out =
         Command::new("bash").arg("-c").arg(&script).stdin(Stdio::null()).output().expect("bash");

@@ -280,12 +280,21 @@ fn resolve(host: &str, port: u16) -> Result<SocketAddr, RunError> {
 
 /// The report reader thread: reports into the latest-value slot until told to stop or the
 /// stream fails (then the tick's watchdog trips).
+///
+/// The reports are the loop's only view of the arm, so when the loop runs on SCHED_FIFO the
+/// reader runs just below it (`fifo_priority - 1`): perception, rendering or recording on the
+/// normal scheduler cannot make the watchdog see a silence the arm did not cause. Refused, it
+/// stays on the normal scheduler (the loop's own report already says real-time was refused).
 fn spawn_report_reader(
     mut reader: ReportReader,
     slot: LatestSlot<ArmState>,
     stop: Arc<AtomicBool>,
+    fifo_priority: Option<i32>,
 ) -> std::io::Result<std::thread::JoinHandle<()>> {
     std::thread::Builder::new().name("hitl-reports".into()).spawn(move || {
+        if let Some(p) = fifo_priority {
+            let _ = rt::os::set_fifo_priority((p - 1).max(1));
+        }
         while !stop.load(Ordering::Acquire) {
             match reader.next_report() {
                 Ok(state) => slot.publish(state),
@@ -624,8 +633,9 @@ pub fn run(req: RunRequest) -> Result<RunReport, RunError> {
     )?;
     let (slot, mut reports) = LatestSlot::new();
     let reader_stop = Arc::new(AtomicBool::new(false));
-    let reader_thread = spawn_report_reader(reader, slot, Arc::clone(&reader_stop))
-        .map_err(|e| RunError::Device(format!("report reader thread: {e}")))?;
+    let reader_thread =
+        spawn_report_reader(reader, slot, Arc::clone(&reader_stop), req.rt.fifo_priority)
+            .map_err(|e| RunError::Device(format!("report reader thread: {e}")))?;
     let first = first_report(&mut reports, Duration::from_secs(2))
         .ok_or_else(|| RunError::Device("the arm sent no report within 2 s".into()))?;
     arm.enable_servo().map_err(|e| RunError::Device(format!("enabling the arm: {e}")))?;

@@ -101,21 +101,29 @@ pub fn apply(options: &RtOptions) -> RtReport {
     }
 
     if let Some(priority) = options.fifo_priority {
-        let param = libc::sched_param { sched_priority: priority.clamp(1, 99) };
-        // SAFETY: pthread_self() is the calling thread; param is a valid, initialised struct.
-        let rc =
-            unsafe { libc::pthread_setschedparam(libc::pthread_self(), libc::SCHED_FIFO, &param) };
-        if rc == 0 {
-            report.fifo = Some(param.sched_priority);
-        } else {
-            report.fallbacks.push(format!(
-                "SCHED_FIFO {} refused ({}); running on the normal scheduler",
-                param.sched_priority,
-                std::io::Error::from_raw_os_error(rc)
-            ));
+        match set_fifo_priority(priority) {
+            Ok(p) => report.fifo = Some(p),
+            Err(why) => report.fallbacks.push(why),
         }
     }
     report
+}
+
+/// Put the calling thread on SCHED_FIFO at `priority` (clamped to 1-99). Returns the priority
+/// set, or why the OS refused (then the thread stays on the normal scheduler).
+pub fn set_fifo_priority(priority: i32) -> Result<i32, String> {
+    let param = libc::sched_param { sched_priority: priority.clamp(1, 99) };
+    // SAFETY: pthread_self() is the calling thread; param is a valid, initialised struct.
+    let rc = unsafe { libc::pthread_setschedparam(libc::pthread_self(), libc::SCHED_FIFO, &param) };
+    if rc == 0 {
+        Ok(param.sched_priority)
+    } else {
+        Err(format!(
+            "SCHED_FIFO {} refused ({}); running on the normal scheduler",
+            param.sched_priority,
+            std::io::Error::from_raw_os_error(rc)
+        ))
+    }
 }
 
 /// The monotonic clock, nanoseconds.

@@ -43,8 +43,10 @@ impl Periodic {
 
     /// Wait for the next deadline and say how punctual the wake-up was.
     ///
-    /// When the previous tick overran its deadline, the missed deadline is not made up: the loop
-    /// runs once, now, marked `overrun`, and the schedule continues from the next deadline.
+    /// When the thread comes back after a deadline has passed (its previous tick ran long, or the
+    /// OS did not run it), the tick runs at once, marked `overrun`; every deadline missed that way
+    /// runs back to back, so tick `k` always stands for `start + k * period`: playback time never
+    /// slips behind wall time and no scheduled capture is skipped.
     pub fn wait(&mut self) -> Wake {
         self.tick += 1;
         let deadline = self.start_ns + self.tick * self.period_ns;
