@@ -1,4 +1,4 @@
-//! `hitl eval RUN.mcap [--json] [--backend B]`: pose metrics of a recording, as the paper defines
+//! `hitl eval RUN.mcap [--json] [--per-frame] [--backend B]`: pose metrics of a recording, as the paper defines
 //! them (see `hitl_perception::metrics` and docs/perception.md).
 //!
 //! Ground truth is `/pose/gt`; the estimate is `/pose/estimate` matched by the frame's capture
@@ -32,6 +32,10 @@ pub struct EvalArgs {
     /// Lab metres per real metre (default: the run's `scale` metadata).
     #[arg(long)]
     pub scale: Option<f64>,
+    /// Also list every frame's errors (e_t, e_r, or "failed"), to see where a track went wrong;
+    /// with --json they go in a `per_frame` array.
+    #[arg(long)]
+    pub per_frame: bool,
 }
 
 fn to_pose(m: [[f64; 4]; 4]) -> Pose {
@@ -44,6 +48,19 @@ pub fn run(args: EvalArgs) -> u8 {
             if args.json {
                 println!("{v}");
             } else {
+                if let Some(rows) = v.get("per_frame").and_then(|p| p.as_array()) {
+                    println!("frame  t [s]     e_t [m]   e_r [deg]");
+                    for (i, r) in rows.iter().enumerate() {
+                        let t = r.get("t_s").and_then(|x| x.as_f64()).unwrap_or(f64::NAN);
+                        match (r.get("et_m").and_then(|x| x.as_f64()), r.get("er_deg")) {
+                            (Some(et), Some(er)) => println!(
+                                "{i:5}  {t:8.3}  {et:8.4}  {:9.3}",
+                                er.as_f64().unwrap_or(f64::NAN)
+                            ),
+                            _ => println!("{i:5}  {t:8.3}  failed"),
+                        }
+                    }
+                }
                 let g = |k: &str| v.get(k).cloned().unwrap_or(serde_json::Value::Null);
                 println!(
                     "frames {} (failures {}), scale {}\n\
@@ -138,6 +155,9 @@ fn eval(args: &EvalArgs) -> Result<serde_json::Value, String> {
         .collect();
     let m = evaluate(&pairs, scale).map_err(|e| e.to_string())?;
     let mut v = m.to_json();
+    if args.per_frame {
+        extra.insert("per_frame".into(), per_frame(&pairs, &m));
+    }
     if let Some(obj) = v.as_object_mut() {
         obj.extend(extra);
         obj.insert(
@@ -146,4 +166,24 @@ fn eval(args: &EvalArgs) -> Result<serde_json::Value, String> {
         );
     }
     Ok(v)
+}
+
+/// One row per ground-truth frame, in capture order: its time from the first frame and its
+/// errors, or only the time when the frame was not scored (no estimate, or an invalid one).
+fn per_frame(pairs: &[PosePair], m: &hitl_perception::metrics::Metrics) -> serde_json::Value {
+    let t0 = pairs.first().map_or(0, |p| p.timestamp_ns);
+    let scored: HashMap<u64, (f64, f64)> =
+        m.per_frame.iter().map(|f| (f.timestamp_ns, (f.et_m, f.er_deg))).collect();
+    pairs
+        .iter()
+        .map(|p| {
+            let t_s = p.timestamp_ns.saturating_sub(t0) as f64 / 1e9;
+            match scored.get(&p.timestamp_ns) {
+                Some((et, er)) => serde_json::json!({
+                    "timestamp_ns": p.timestamp_ns, "t_s": t_s, "et_m": et, "er_deg": er
+                }),
+                None => serde_json::json!({ "timestamp_ns": p.timestamp_ns, "t_s": t_s }),
+            }
+        })
+        .collect()
 }
