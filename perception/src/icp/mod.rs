@@ -4,9 +4,13 @@
 //!   hypothesis grid ([`global`]), each refined briefly by ICP and the best scored against the
 //!   image (silhouette and free space, [`score`]).
 //! - Other frames: point-to-plane ICP ([`align`]) from a constant-velocity prediction of the
-//!   previous pose. Correspondences go from the visible scene to the nearest camera-facing model
-//!   sample, so partial views (the target cut by the image border or self-occluded) only constrain
-//!   what is seen.
+//!   previous pose, placed so the model's camera-facing surface sits on the scene (the range can
+//!   change by a model size between captures, more than ICP's capture radius). Correspondences go
+//!   from the visible scene to the nearest camera-facing model sample, so partial views (the
+//!   target cut by the image border or self-occluded) only constrain what is seen.
+//! - Registration while a track exists (or after one was lost) keeps the track's branch: among
+//!   the hypotheses that explain the frame as well as the best one, it takes the one nearest the
+//!   prediction, so a (near-)symmetric target does not flip between its look-alike poses.
 //! - A track is declared failed when too few scene points fit the model, the projected model
 //!   leaves the silhouette, or it sits in front of observed free space; then the tracker
 //!   re-registers on the same frame and reports `Lost` if that fails too.
@@ -82,6 +86,14 @@ impl Default for IcpConfig {
     }
 }
 
+/// Scores this close to the best are ties: the frame cannot tell the hypotheses apart.
+const TIE_MARGIN: f64 = 0.02;
+
+/// Angle between two poses' rotations, radians.
+fn rotation_distance(a: &Pose, b: &Pose) -> f64 {
+    pose::rotation_angle(&(pose::rotation(a).transpose() * pose::rotation(b)))
+}
+
 /// The built-in tracker.
 pub struct IcpTracker {
     cfg: IcpConfig,
@@ -91,8 +103,8 @@ pub struct IcpTracker {
     fronts: Vec<Vector3<f64>>,
     prev: Option<Pose>,
     prev2: Option<Pose>,
-    /// Hypothesis used for re-registration after a lost track (to keep a symmetric target on the
-    /// same branch).
+    /// The last accepted pose: the registration prior after a lost track (to keep a symmetric
+    /// target on the same branch).
     last_good: Option<Pose>,
 }
 
@@ -149,13 +161,21 @@ impl IcpTracker {
             && pose::is_rigid(&s.fit.pose)
     }
 
-    /// Global registration on this frame; the best hypothesis (acceptable or not).
+    /// Global registration on this frame; the chosen hypothesis (acceptable or not).
     ///
     /// Three stages, each keeping the best-ranked hypotheses of the previous one: every grid
     /// rotation gets a few ICP steps on a sparse cloud; the best `coarse_keep` get more steps on a
     /// denser one; the best `keep` are refined fully. Ranking = inlier fraction x silhouette x
     /// (1 - free-space violation).
-    fn register(&self, frame: &PerceptionFrame, scene: &[Vector3<f64>]) -> Option<Scored> {
+    ///
+    /// `prior` (the track's predicted pose, placed on the scene) joins the final hypotheses and
+    /// breaks ties: see the module docs.
+    fn register(
+        &self,
+        frame: &PerceptionFrame,
+        scene: &[Vector3<f64>],
+        prior: Option<&Pose>,
+    ) -> Option<Scored> {
         let sparse = cloud::thin(scene, self.cfg.coarse_points / 2);
         let dense = cloud::thin(scene, self.cfg.coarse_points * 2);
         let c = cloud::centroid(&sparse);
@@ -186,22 +206,30 @@ impl IcpTracker {
             let s: Vec<String> = cands.iter().map(|c| format!("{:.3}", c.0)).collect();
             eprintln!("icp registration candidates: {} ({:?})", s.join(" "), t0.elapsed());
         }
-        let mut best: Option<Scored> = None;
-        for (_, p) in &cands {
-            let s = self.full_check(frame, scene, p);
-            if best.is_none_or(|b| s.score() > b.score()) {
-                best = Some(s);
-            }
+        let mut checked: Vec<Scored> =
+            cands.iter().map(|(_, p)| self.full_check(frame, scene, p)).collect();
+        if let Some(p) = prior {
+            checked.push(self.full_check(frame, scene, p));
         }
-        // Prefer staying on the branch of the last good pose (symmetric targets) when it scores
-        // as well as the best hypothesis.
-        if let Some(lg) = self.last_good {
-            let s = self.full_check(frame, scene, &lg);
-            if best.is_none_or(|b| s.score() >= b.score() - 0.02) && self.acceptable(&s) {
-                best = Some(s);
-            }
-        }
-        best
+        let best = checked.iter().max_by(|a, b| a.score().total_cmp(&b.score())).copied();
+        let Some(p) = prior else {
+            return best;
+        };
+        // Keep the track's branch: of the hypotheses as good as the best, the nearest to it.
+        let top = best.map_or(f64::NEG_INFINITY, |b| b.score());
+        checked
+            .into_iter()
+            .filter(|s| s.score() >= top - TIE_MARGIN && self.acceptable(s))
+            .min_by(|a, b| {
+                rotation_distance(&a.fit.pose, p).total_cmp(&rotation_distance(&b.fit.pose, p))
+            })
+            .or(best)
+    }
+
+    /// `pose` moved so the model's camera-facing surface is centred on the scene point `at`.
+    fn placed(&self, pose: &Pose, at: &Vector3<f64>) -> Pose {
+        let r = pose::rotation(pose);
+        pose::from_rt(&r, &(at - global::front_centroid(&self.model, &r)))
     }
 
     fn accept(&mut self, s: &Scored, kind: EstimateKind) -> Estimate {
@@ -229,11 +257,15 @@ impl PoseEstimator for IcpTracker {
         if scene.len() < self.cfg.min_scene_points {
             return Ok(self.lose());
         }
-        if let Some(prev) = self.prev {
+        let at = cloud::centroid(&scene);
+        let prediction = self.prev.map(|prev| {
             let pred = match self.prev2 {
                 Some(p2) => prev * pose::inverse(&p2) * prev,
                 None => prev,
             };
+            (self.placed(&pred, &at), self.placed(&prev, &at))
+        });
+        if let Some((pred, prev)) = prediction {
             let mut s = self.full_check(frame, &scene, &pred);
             if !self.acceptable(&s) && pred != prev {
                 s = self.full_check(frame, &scene, &prev);
@@ -242,7 +274,11 @@ impl PoseEstimator for IcpTracker {
                 return Ok(self.accept(&s, EstimateKind::Tracked));
             }
         }
-        let reg = self.register(frame, &scene);
+        let prior = prediction.map(|(pred, _)| pred).or_else(|| {
+            // After a lost track: the last good pose, placed on this frame's target.
+            self.last_good.map(|p| self.placed(&p, &at))
+        });
+        let reg = self.register(frame, &scene, prior.as_ref());
         if std::env::var_os("HITL_ICP_DEBUG").is_some() {
             if let Some(s) = &reg {
                 eprintln!(
