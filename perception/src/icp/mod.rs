@@ -10,7 +10,8 @@
 //!   target cut by the image border or self-occluded) only constrain what is seen.
 //! - Registration while a track exists (or after one was lost) keeps the track's branch: among
 //!   the hypotheses that explain the frame as well as the best one, it takes the one nearest the
-//!   prediction, so a (near-)symmetric target does not flip between its look-alike poses.
+//!   prediction (after a loss: the last good pose carried on by its motion for the frames
+//!   missed), so a (near-)symmetric target does not flip between its look-alike poses.
 //! - A track is declared failed when too few scene points fit the model, the projected model
 //!   leaves the silhouette, or it sits in front of observed free space; then the tracker
 //!   re-registers on the same frame and reports `Lost` if that fails too.
@@ -103,10 +104,17 @@ pub struct IcpTracker {
     fronts: Vec<Vector3<f64>>,
     prev: Option<Pose>,
     prev2: Option<Pose>,
-    /// The last accepted pose: the registration prior after a lost track (to keep a symmetric
-    /// target on the same branch).
+    /// The last accepted pose, the motion per frame between the last two consecutive accepted
+    /// ones, and the frames since: after a lost track the registration prior is that motion
+    /// carried on from the last good pose (a symmetric target keeps its branch through an
+    /// occlusion).
     last_good: Option<Pose>,
+    velocity: Option<Pose>,
+    missed: u32,
 }
+
+/// Frames a lost track's motion is carried on for; after that, registration has no prior.
+const MAX_EXTRAPOLATED: u32 = 10;
 
 /// Outcome of one full check of a pose.
 #[derive(Debug, Clone, Copy)]
@@ -128,7 +136,17 @@ impl IcpTracker {
         let model = ModelCloud::from_mesh(mesh, cfg.model_points)?;
         let grid = global::rotation_grid(cfg.views, cfg.inplane);
         let fronts = grid.iter().map(|r| global::front_centroid(&model, r)).collect();
-        Ok(IcpTracker { cfg, model, grid, fronts, prev: None, prev2: None, last_good: None })
+        Ok(IcpTracker {
+            cfg,
+            model,
+            grid,
+            fronts,
+            prev: None,
+            prev2: None,
+            last_good: None,
+            velocity: None,
+            missed: 0,
+        })
     }
 
     pub fn config(&self) -> &IcpConfig {
@@ -232,16 +250,34 @@ impl IcpTracker {
         pose::from_rt(&r, &(at - global::front_centroid(&self.model, &r)))
     }
 
+    /// Where the last good pose has moved by now if the target kept its motion, placed on `at`;
+    /// `None` without a good pose or after too long a loss.
+    fn carried_on(&self, at: &Vector3<f64>) -> Option<Pose> {
+        let mut p = self.last_good.filter(|_| self.missed <= MAX_EXTRAPOLATED)?;
+        if let Some(v) = self.velocity {
+            for _ in 0..=self.missed {
+                p = v * p;
+            }
+        }
+        Some(self.placed(&p, at))
+    }
+
     fn accept(&mut self, s: &Scored, kind: EstimateKind) -> Estimate {
+        let new = s.fit.pose;
+        if let (Some(last), 0) = (self.last_good, self.missed) {
+            self.velocity = Some(new * pose::inverse(&last));
+        }
+        self.missed = 0;
         self.prev2 = self.prev;
-        self.prev = Some(s.fit.pose);
-        self.last_good = Some(s.fit.pose);
+        self.prev = Some(new);
+        self.last_good = Some(new);
         Estimate { pose: Some(s.fit.pose), kind, residual_m: s.fit.rms }
     }
 
     fn lose(&mut self) -> Estimate {
         self.prev = None;
         self.prev2 = None;
+        self.missed = self.missed.saturating_add(1);
         Estimate::lost()
     }
 }
@@ -274,10 +310,8 @@ impl PoseEstimator for IcpTracker {
                 return Ok(self.accept(&s, EstimateKind::Tracked));
             }
         }
-        let prior = prediction.map(|(pred, _)| pred).or_else(|| {
-            // After a lost track: the last good pose, placed on this frame's target.
-            self.last_good.map(|p| self.placed(&p, &at))
-        });
+        // Without a track (reset, or lost): the last good pose carried on by its motion.
+        let prior = prediction.map(|(pred, _)| pred).or_else(|| self.carried_on(&at));
         let reg = self.register(frame, &scene, prior.as_ref());
         if std::env::var_os("HITL_ICP_DEBUG").is_some() {
             if let Some(s) = &reg {
@@ -314,7 +348,8 @@ impl ScalableEstimator for IcpTracker {
         for f in &mut self.fronts {
             *f *= factor;
         }
-        for p in [&mut self.prev, &mut self.prev2, &mut self.last_good].into_iter().flatten() {
+        let poses = [&mut self.prev, &mut self.prev2, &mut self.last_good, &mut self.velocity];
+        for p in poses.into_iter().flatten() {
             for r in 0..3 {
                 p[(r, 3)] *= factor;
             }
