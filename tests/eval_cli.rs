@@ -7,15 +7,9 @@ use hitl_hal::Intrinsics;
 use hitl_record::{FrameRecord, Pose, PoseStamped, Recorder, RunMetadata};
 use nalgebra::{Isometry3, Translation3, UnitQuaternion, Vector3};
 use std::path::Path;
-use std::process::{Command, Output, Stdio};
 
-fn hitl(args: &[&str]) -> Output {
-    Command::new(env!("CARGO_BIN_EXE_hitl"))
-        .args(args)
-        .stdin(Stdio::null())
-        .output()
-        .expect("run hitl")
-}
+mod common;
+use common::hitl;
 
 fn pose(iso: &Isometry3<f64>) -> Pose {
     let m = iso.to_homogeneous();

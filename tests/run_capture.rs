@@ -8,15 +8,9 @@ use hitl_record::reader::{decode_image, read_recording, visit};
 use hitl_trajectories::npz;
 use std::collections::BTreeMap;
 use std::ops::ControlFlow;
-use std::process::{Command, Stdio};
 
-fn hitl(args: &[&str]) -> std::process::Output {
-    Command::new(env!("CARGO_BIN_EXE_hitl"))
-        .args(args)
-        .stdin(Stdio::null())
-        .output()
-        .expect("run hitl")
-}
+mod common;
+use common::{hitl, SHARED_VM_LAB};
 
 #[test]
 fn one_image_set_and_one_ground_truth_per_capture_and_the_truth_lands_on_the_mask() {
@@ -52,10 +46,9 @@ fn one_image_set_and_one_ground_truth_per_capture_and_the_truth_lands_on_the_mas
         "--light",
         "sim",
         "--plain",
-        // The default lab, with a watchdog a shared VM's steal time cannot trip (the file says
-        // why): this test is about captures, the watchdog has its own.
+        // This test is about captures; the interlocks a shared VM can trip have their own.
         "--config",
-        concat!(env!("CARGO_MANIFEST_DIR"), "/tests/data/shared-vm-lab.toml"),
+        SHARED_VM_LAB,
     ]);
     let out =
         format!("{}{}", String::from_utf8_lossy(&run.stdout), String::from_utf8_lossy(&run.stderr));

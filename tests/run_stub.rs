@@ -9,6 +9,9 @@ use hitl_record::Phase;
 use hitl_trajectories::{npz, timing::SetpointTable};
 use std::path::{Path, PathBuf};
 use std::process::{Command, Output, Stdio};
+
+mod common;
+use common::{hitl, SHARED_VM_LAB};
 use std::sync::Mutex;
 
 static ONE_AT_A_TIME: Mutex<()> = Mutex::new(());
@@ -36,14 +39,6 @@ fn numpy_trajectory(dir: &Path) -> PathBuf {
     path
 }
 
-fn hitl(args: &[&str]) -> Output {
-    Command::new(env!("CARGO_BIN_EXE_hitl"))
-        .args(args)
-        .stdin(Stdio::null())
-        .output()
-        .expect("run hitl")
-}
-
 struct Run {
     out: Output,
     mcap: PathBuf,
@@ -54,10 +49,6 @@ struct Run {
 fn run_with(extra: &[&str]) -> Run {
     run_with_camera("none", extra)
 }
-
-/// The lab these runs use: the default one with a watchdog a shared VM cannot trip by itself
-/// (the file says why). The stall-reports case keeps the default watchdog.
-const SHARED_VM_LAB: &str = concat!(env!("CARGO_MANIFEST_DIR"), "/tests/data/shared-vm-lab.toml");
 
 fn run_with_camera(camera: &str, extra: &[&str]) -> Run {
     let dir = tempfile::tempdir().expect("tempdir");
