@@ -84,7 +84,8 @@ impl std::str::FromStr for BackendSpec {
 }
 
 /// Builds the backend a spec names. `mesh` is the target model at the scale the camera sees it
-/// (lab metres); the ICP tracker and mask-output ONNX models need it. `None` gives `Ok(None)`.
+/// (lab metres); the ICP tracker, mask-output ONNX models and the external estimator
+/// (which receives it in its handshake) need it. `None` gives `Ok(None)`.
 pub fn backend_from_spec(
     spec: &BackendSpec,
     mesh: &Mesh,
@@ -95,6 +96,8 @@ pub fn backend_from_spec(
         BackendSpec::Onnx(path) => {
             Some(Box::new(crate::onnx::OnnxEstimator::load(path, Some(mesh))?))
         }
-        BackendSpec::Socket(path) => Some(Box::new(crate::socket::SocketEstimator::connect(path)?)),
+        BackendSpec::Socket(path) => {
+            Some(Box::new(crate::socket::SocketEstimator::connect(path, mesh)?))
+        }
     })
 }

@@ -37,8 +37,9 @@ pub struct RunArgs {
     /// Light: sim, dmx:DEV (Enttec DMX USB Pro), trigger:DEV (trigger box), or none.
     #[arg(long, default_value = "sim", value_name = "sim|dmx:DEV|trigger:DEV|none")]
     pub light: String,
-    /// Pose estimation on captured frames: icp, onnx:MODEL, or none.
-    #[arg(long, default_value = "none", value_name = "icp|onnx:MODEL|none")]
+    /// Pose estimation on captured frames: icp, onnx:MODEL, socket:PATH (an external estimator
+    /// listening on a unix socket, docs/perception.md), or none.
+    #[arg(long, default_value = "none", value_name = "icp|onnx:MODEL|socket:PATH|none")]
     pub perception: String,
     /// Simulated camera intrinsics: nfov, wfov (the paper's presets) or orbbec.
     #[arg(long, default_value = "orbbec", value_name = "nfov|wfov|orbbec")]
