@@ -8,7 +8,7 @@
 use crate::exit;
 use hitl_perception::estimator::BackendSpec;
 use hitl_perception::metrics::{evaluate, PosePair};
-use hitl_perception::pose::Pose;
+use hitl_perception::pose::{self, Pose};
 use hitl_perception::replay::replay_frames;
 use hitl_perception::{backend_from_spec, TargetModel};
 use std::collections::HashMap;
@@ -22,7 +22,8 @@ pub struct EvalArgs {
     /// Print one JSON object (frames, scale, mean/median/std of e_t and e_r, failures, ...).
     #[arg(long)]
     pub json: bool,
-    /// Re-run a backend offline over the recorded frames: icp or onnx:MODEL.onnx.
+    /// Re-run a backend offline over the recorded frames: icp, onnx:MODEL.onnx, or socket:PATH
+    /// (an external estimator listening on a unix socket, docs/perception.md).
     #[arg(long)]
     pub backend: Option<String>,
     /// Target model for --backend: a built-in name (asymmetric, one-plane, two-planes) or an
@@ -49,12 +50,13 @@ pub fn run(args: EvalArgs) -> u8 {
                 println!("{v}");
             } else {
                 if let Some(rows) = v.get("per_frame").and_then(|p| p.as_array()) {
-                    println!("frame  t [s]     e_t [m]   e_r [deg]");
+                    println!("frame  t [s]     e_t [m]   e_r [deg]  raw e_r [deg]");
                     for (i, r) in rows.iter().enumerate() {
                         let t = r.get("t_s").and_then(|x| x.as_f64()).unwrap_or(f64::NAN);
+                        let raw = r.get("raw_er_deg").and_then(|x| x.as_f64()).unwrap_or(f64::NAN);
                         match (r.get("et_m").and_then(|x| x.as_f64()), r.get("er_deg")) {
                             (Some(et), Some(er)) => println!(
-                                "{i:5}  {t:8.3}  {et:8.4}  {:9.3}",
+                                "{i:5}  {t:8.3}  {et:8.4}  {:9.3}  {raw:13.3}",
                                 er.as_f64().unwrap_or(f64::NAN)
                             ),
                             _ => println!("{i:5}  {t:8.3}  failed"),
@@ -170,6 +172,8 @@ fn eval(args: &EvalArgs) -> Result<serde_json::Value, String> {
 
 /// One row per ground-truth frame, in capture order: its time from the first frame and its
 /// errors, or only the time when the frame was not scored (no estimate, or an invalid one).
+/// `raw_er_deg` is the rotation error before the first-frame calibration: a calibration frame
+/// that was itself off shows there as a constant offset.
 fn per_frame(pairs: &[PosePair], m: &hitl_perception::metrics::Metrics) -> serde_json::Value {
     let t0 = pairs.first().map_or(0, |p| p.timestamp_ns);
     let scored: HashMap<u64, (f64, f64)> =
@@ -180,10 +184,17 @@ fn per_frame(pairs: &[PosePair], m: &hitl_perception::metrics::Metrics) -> serde
             let t_s = p.timestamp_ns.saturating_sub(t0) as f64 / 1e9;
             match scored.get(&p.timestamp_ns) {
                 Some((et, er)) => serde_json::json!({
-                    "timestamp_ns": p.timestamp_ns, "t_s": t_s, "et_m": et, "er_deg": er
+                    "timestamp_ns": p.timestamp_ns, "t_s": t_s, "et_m": et, "er_deg": er,
+                    "raw_er_deg": p.est.map(|e| raw_rotation_error_deg(&e, &p.gt)),
                 }),
                 None => serde_json::json!({ "timestamp_ns": p.timestamp_ns, "t_s": t_s }),
             }
         })
         .collect()
+}
+
+/// Angle between the estimated and true rotations, degrees, with no calibration applied.
+fn raw_rotation_error_deg(est: &Pose, gt: &Pose) -> f64 {
+    let r = pose::rotation(est).transpose() * pose::rotation(gt);
+    pose::rotation_angle(&r).to_degrees()
 }

@@ -1,22 +1,47 @@
 //! Image-space checks of a pose hypothesis against the frame: does the projected model fall inside
-//! the target's silhouette, and does it stay behind the observed surface (free space)?
+//! the target's silhouette, and does it stay behind the observed surface (free space)? Samples the
+//! image cannot judge (seen edge-on, or hidden behind another object) are left out.
 
 use super::model::ModelCloud;
 use crate::pose::{self, Pose};
 use crate::PerceptionFrame;
 
+/// Samples whose surface normal is within this cosine of perpendicular to the line of sight are
+/// not judged: seen edge-on, a thin part (a solar wing) covers less than a pixel and the sensor
+/// misses it, so a correct pose would be blamed for it (cos 80 deg).
+const GRAZING_COS: f64 = 0.17;
+
+/// What a model sample hidden behind another object (the target's stand, the arm) counts as.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Hidden {
+    /// A miss. For registration: with no track saying where the target is, a view must not be
+    /// explained by hiding model parts behind the stand (a flipped pose hides the part that
+    /// would tell it apart).
+    Miss,
+    /// Not judged. For tracking, whose prediction already says where the target is: a part
+    /// behind the stand is no evidence against it.
+    Skipped,
+}
+
 /// Image-space agreement of a pose with the frame.
 #[derive(Debug, Clone, Copy)]
 pub struct ImageCheck {
-    /// Fraction of in-image model samples that land on (or next to) a target pixel.
+    /// Fraction of in-image model samples (not seen edge-on, not hidden behind another object)
+    /// that land on (or next to) a target pixel.
     pub silhouette: f64,
     /// Fraction of those that lie in front of the observed surface by more than the tolerance.
     pub violation: f64,
 }
 
 /// Projects every model sample at `t` and compares with the frame's target pixels and depth.
-pub fn check(model: &ModelCloud, frame: &PerceptionFrame, t: &Pose, tol: f64) -> ImageCheck {
-    check_strided(model, frame, t, tol, 1)
+pub fn check(
+    model: &ModelCloud,
+    frame: &PerceptionFrame,
+    t: &Pose,
+    tol: f64,
+    behind_others: Hidden,
+) -> ImageCheck {
+    check_strided(model, frame, t, tol, 1, behind_others)
 }
 
 /// [`check`] on every `stride`-th model sample (for cheap hypothesis ranking).
@@ -26,15 +51,21 @@ pub fn check_strided(
     t: &Pose,
     tol: f64,
     stride: usize,
+    behind_others: Hidden,
 ) -> ImageCheck {
     let k = &frame.intrinsics;
     let (w, h) = (k.width as i64, k.height as i64);
     let r = pose::rotation(t);
     let tr = pose::translation(t);
     let (mut in_image, mut hits, mut violations) = (0usize, 0usize, 0usize);
-    for p in model.points.iter().step_by(stride.max(1)) {
+    let samples = model.points.iter().zip(&model.normals).step_by(stride.max(1));
+    for (p, n) in samples {
         let q = r * p + tr;
         if q.z <= 0.0 {
+            continue;
+        }
+        // A surface seen edge-on covers less than a pixel: a depth sensor does not see it.
+        if (r * n).dot(&q).abs() < GRAZING_COS * q.norm() {
             continue;
         }
         let u = (k.fx * q.x / q.z + k.cx).round() as i64;
@@ -42,24 +73,32 @@ pub fn check_strided(
         if u < 0 || v < 0 || u >= w || v >= h {
             continue;
         }
-        in_image += 1;
         // Rounding to a pixel can move a sample across an edge: judge it by its 3x3 neighbourhood
         // (on the silhouette if any neighbour is target; in front of free space only if it is in
-        // front of every neighbouring target surface).
+        // front of every neighbouring target surface; hidden if every neighbour is something
+        // else in front of it).
         let mut near = false;
+        let mut hidden = true;
         let mut nearest_surface = f64::INFINITY;
         for dv in -1..=1 {
             for du in -1..=1 {
                 let (uu, vv) = (u + du, v + dv);
                 if uu >= 0 && vv >= 0 && uu < w && vv < h {
                     let j = (vv * w + uu) as usize;
+                    let d = frame.depth_m[j] as f64;
                     if frame.is_target(j) {
                         near = true;
-                        nearest_surface = nearest_surface.min(frame.depth_m[j] as f64);
+                        nearest_surface = nearest_surface.min(d);
+                    } else if !(d.is_finite() && d > 0.0 && d < q.z - tol) {
+                        hidden = false;
                     }
                 }
             }
         }
+        if !near && hidden && matches!(behind_others, Hidden::Skipped) {
+            continue;
+        }
+        in_image += 1;
         if near {
             hits += 1;
             if q.z < nearest_surface - tol {
