@@ -4,11 +4,13 @@
 //! - [`rt`]: the real-time thread: fixed period, absolute deadlines, OS real-time settings;
 //! - [`control`]: the run (state machine, interlocks, the tick, approach and stop planning);
 //! - [`devices`]: absent ("none") devices and device choices;
-//! - [`cli`]: one module per subcommand; [`exit`]: the contract's exit codes.
+//! - [`cli`]: one module per subcommand; [`exit`]: the contract's exit codes; [`console`]: output
+//!   that a closed pipe cannot turn into a panic.
 
 pub mod bench;
 pub mod capture;
 pub mod cli;
+pub mod console;
 pub mod control;
 pub mod devices;
 pub mod exit;

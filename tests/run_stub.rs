@@ -247,3 +247,31 @@ fn a_real_arm_is_never_moved_without_confirmation() {
     assert_eq!(code(&out), 2, "{}", text(&out));
     assert!(text(&out).contains("refusing to move the real arm"), "{}", text(&out));
 }
+
+#[test]
+fn a_closed_output_pipe_does_not_cut_a_run_short() {
+    // `hitl run ... | head -1`: once the reader is gone every write fails (EPIPE). The run must
+    // still play to the end and close its recording; a panic on the progress line would skip
+    // the controlled stop.
+    let _one = ONE_AT_A_TIME.lock().unwrap_or_else(|e| e.into_inner());
+    let dir = tempfile::tempdir().expect("tempdir");
+    let traj = numpy_trajectory(dir.path());
+    let mcap = dir.path().join("run.mcap");
+    let mut child = Command::new(env!("CARGO_BIN_EXE_hitl"))
+        .args(["run", traj.to_str().expect("utf-8"), "--record"])
+        .arg(&mcap)
+        .args(["--camera", "none", "--light", "sim", "--plain", "--config", SHARED_VM_LAB])
+        .stdin(Stdio::null())
+        .stdout(Stdio::piped())
+        .stderr(Stdio::piped())
+        .spawn()
+        .expect("spawn hitl");
+    drop(child.stdout.take());
+    drop(child.stderr.take());
+    let status = child.wait().expect("wait");
+    assert_eq!(status.code(), Some(0), "{status:?}");
+    let rec = read_recording(&mcap).expect("readable");
+    assert!(rec.end.as_ref().is_some_and(|e| e.complete), "the file has its footer");
+    assert!(rec.events.is_empty() || rec.events.iter().all(|e| e.kind != "operator-stop"));
+    assert_eq!(rec.setpoints.last().map(|s| s.phase), Some(Phase::Playback));
+}

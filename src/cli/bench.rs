@@ -82,11 +82,11 @@ fn venv_python() -> Option<String> {
 
 pub fn run(args: BenchArgs) -> u8 {
     if !(args.seconds > 0.0 && args.seconds.is_finite()) {
-        eprintln!("hitl bench: --seconds must be positive");
+        crate::errln!("hitl bench: --seconds must be positive");
         return exit::BAD_INPUT;
     }
     if !(50.0..=1000.0).contains(&args.rate) {
-        eprintln!("hitl bench: --rate must be within 50-1000 Hz");
+        crate::errln!("hitl bench: --rate must be within 50-1000 Hz");
         return exit::BAD_INPUT;
     }
     let Some((width, height)) = args
@@ -94,7 +94,7 @@ pub fn run(args: BenchArgs) -> u8 {
         .split_once('x')
         .and_then(|(w, h)| Some((w.parse::<u32>().ok()?, h.parse::<u32>().ok()?)))
     else {
-        eprintln!("hitl bench: --size must be WIDTHxHEIGHT, e.g. 320x256");
+        crate::errln!("hitl bench: --size must be WIDTHxHEIGHT, e.g. 320x256");
         return exit::BAD_INPUT;
     };
     let python = venv_python().unwrap_or_else(|| "python3".into());
@@ -123,7 +123,7 @@ pub fn run(args: BenchArgs) -> u8 {
         Which::Render => hitl_sim_stub::camera::bench_render(),
         #[cfg(not(feature = "stub"))]
         Which::Protocol | Which::Render => {
-            eprintln!("hitl bench: this build has no stub");
+            crate::errln!("hitl bench: this build has no stub");
             return exit::BAD_INPUT;
         }
         Which::Record => {
@@ -155,9 +155,9 @@ pub fn run(args: BenchArgs) -> u8 {
         }),
     };
     if args.json {
-        println!("{figures}");
+        crate::outln!("{figures}");
     } else {
-        println!("{}", serde_json::to_string_pretty(&figures).unwrap_or_default());
+        crate::outln!("{}", serde_json::to_string_pretty(&figures).unwrap_or_default());
     }
     exit::OK
 }

@@ -84,14 +84,14 @@ pub fn run(args: CheckArgs) -> u8 {
     let checked = match checked {
         Ok(c) => c,
         Err(e) => {
-            eprintln!("hitl check: {e}");
+            crate::errln!("hitl check: {e}");
             if args.json {
                 let v = serde_json::json!({
                     "file": args.traj.display().to_string(),
                     "safe": false,
                     "error": e.to_string(),
                 });
-                println!("{v}");
+                crate::outln!("{v}");
             }
             return exit::BAD_INPUT;
         }
@@ -103,9 +103,9 @@ pub fn run(args: CheckArgs) -> u8 {
             obj.insert("file".into(), args.traj.display().to_string().into());
             obj.insert("load_warnings".into(), checked.loaded.warnings.clone().into());
         }
-        println!("{v}");
+        crate::outln!("{v}");
     } else {
-        print!("{}", human(&args.traj, &checked));
+        crate::out!("{}", human(&args.traj, &checked));
     }
     if report.is_safe() {
         exit::OK

@@ -47,24 +47,24 @@ pub fn run(args: EvalArgs) -> u8 {
     match eval(&args) {
         Ok(v) => {
             if args.json {
-                println!("{v}");
+                crate::outln!("{v}");
             } else {
                 if let Some(rows) = v.get("per_frame").and_then(|p| p.as_array()) {
-                    println!("frame  t [s]     e_t [m]   e_r [deg]  raw e_r [deg]");
+                    crate::outln!("frame  t [s]     e_t [m]   e_r [deg]  raw e_r [deg]");
                     for (i, r) in rows.iter().enumerate() {
                         let t = r.get("t_s").and_then(|x| x.as_f64()).unwrap_or(f64::NAN);
                         let raw = r.get("raw_er_deg").and_then(|x| x.as_f64()).unwrap_or(f64::NAN);
                         match (r.get("et_m").and_then(|x| x.as_f64()), r.get("er_deg")) {
-                            (Some(et), Some(er)) => println!(
+                            (Some(et), Some(er)) => crate::outln!(
                                 "{i:5}  {t:8.3}  {et:8.4}  {:9.3}  {raw:13.3}",
                                 er.as_f64().unwrap_or(f64::NAN)
                             ),
-                            _ => println!("{i:5}  {t:8.3}  failed"),
+                            _ => crate::outln!("{i:5}  {t:8.3}  failed"),
                         }
                     }
                 }
                 let g = |k: &str| v.get(k).cloned().unwrap_or(serde_json::Value::Null);
-                println!(
+                crate::outln!(
                     "frames {} (failures {}), scale {}\n\
                      e_t real m: mean {} median {} std {}\n\
                      e_r deg:    mean {} median {} std {}",
@@ -82,7 +82,7 @@ pub fn run(args: EvalArgs) -> u8 {
             exit::OK
         }
         Err(e) => {
-            eprintln!("hitl eval: {e}");
+            crate::errln!("hitl eval: {e}");
             exit::BAD_INPUT
         }
     }

@@ -138,34 +138,41 @@ pub fn request(args: &PlanArgs) -> Result<PlanRequest, String> {
 }
 
 fn print_summary(s: &planner::PlanSummary, out: &std::path::Path) {
-    println!("wrote {}", out.display());
-    println!(
+    crate::outln!("wrote {}", out.display());
+    crate::outln!(
         "  {} at {} m: {} waypoints ({} captures), {:.1} s, {} revolution(s)",
-        s.preset, s.range_m, s.waypoints, s.captures, s.duration_s, s.passes
+        s.preset,
+        s.range_m,
+        s.waypoints,
+        s.captures,
+        s.duration_s,
+        s.passes
     );
-    println!(
+    crate::outln!(
         "  scale {:.4e} lab m per real m; camera {:.3}-{:.3} m from the target",
-        s.scale, s.min_camera_target_m, s.max_camera_target_m
+        s.scale,
+        s.min_camera_target_m,
+        s.max_camera_target_m
     );
-    println!("  arc of u: {:.1}-{:.1} deg (feasible in full)", s.arc_deg.0, s.arc_deg.1);
-    println!(
+    crate::outln!("  arc of u: {:.1}-{:.1} deg (feasible in full)", s.arc_deg.0, s.arc_deg.1);
+    crate::outln!(
         "  peak joint speeds (rad/s): {}",
         s.peak_joint_speed_rad_s.iter().map(|v| format!("{v:.3}")).collect::<Vec<_>>().join(" ")
     );
-    println!(
+    crate::outln!(
         "  IK residuals: {:.2e} m, {:.2e} deg; nearest obstacle {:.1} mm beyond its margin",
         s.max_ik_pos_err_m,
         s.max_ik_rot_err_deg,
         s.min_clearance_m * 1e3
     );
-    println!("  Sun phase {:.1}-{:.1} deg", s.sun_phase_deg.0, s.sun_phase_deg.1);
+    crate::outln!("  Sun phase {:.1}-{:.1} deg", s.sun_phase_deg.0, s.sun_phase_deg.1);
 }
 
 pub fn run(args: PlanArgs) -> u8 {
     let req = match request(&args) {
         Ok(r) => r,
         Err(e) => {
-            eprintln!("hitl plan: {e}");
+            crate::errln!("hitl plan: {e}");
             return exit::BAD_INPUT;
         }
     };
@@ -173,7 +180,7 @@ pub fn run(args: PlanArgs) -> u8 {
         Some(path) => match LabConfig::load(path) {
             Ok(l) => l,
             Err(e) => {
-                eprintln!("hitl plan: {e}");
+                crate::errln!("hitl plan: {e}");
                 return exit::BAD_INPUT;
             }
         },
@@ -181,37 +188,40 @@ pub fn run(args: PlanArgs) -> u8 {
     };
     let mut progress = |done: usize, total: usize| {
         if !args.json {
-            eprint!("\rhitl plan: inverse kinematics, candidate {done}/{total}");
+            crate::err!("\rhitl plan: inverse kinematics, candidate {done}/{total}");
             let _ = std::io::stderr().flush();
         }
     };
     let result = planner::plan(&req, &lab, &mut progress);
     if !args.json {
-        eprintln!();
+        crate::errln!();
     }
     let plan = match result {
         Ok(p) => p,
         Err(PlanError::Request(m)) => {
-            eprintln!("hitl plan: {m}");
+            crate::errln!("hitl plan: {m}");
             return exit::BAD_INPUT;
         }
         Err(e @ PlanError::DoesNotFit { .. }) => {
-            eprintln!("hitl plan: refused: {e}");
+            crate::errln!("hitl plan: refused: {e}");
             return exit::BAD_INPUT;
         }
     };
     let table = match timing::SetpointTable::build(&plan.trajectory, args.rate, 1.0) {
         Ok(t) => t,
         Err(e) => {
-            eprintln!("hitl plan: the plan cannot be time-parametrised at {} Hz: {e}", args.rate);
+            crate::errln!(
+                "hitl plan: the plan cannot be time-parametrised at {} Hz: {e}",
+                args.rate
+            );
             return exit::PREFLIGHT_REFUSED;
         }
     };
     let report = preflight::check(&plan.trajectory, &table, &lab);
     if !report.is_safe() {
-        eprintln!("hitl plan: the planned motion fails preflight, nothing written:");
+        crate::errln!("hitl plan: the planned motion fails preflight, nothing written:");
         for v in &report.violations {
-            eprintln!("  {}", v.message);
+            crate::errln!("  {}", v.message);
         }
         // Too fast for the lab's speed limits: say how long the plan would have to last.
         let ratio = plan
@@ -223,7 +233,7 @@ pub fn run(args: PlanArgs) -> u8 {
             .fold(0.0, f64::max);
         if ratio > 0.9 {
             let longer = (plan.summary.duration_s * ratio / 0.8).ceil();
-            eprintln!(
+            crate::errln!(
                 "  the waypoints alone reach {:.0} % of the speed limit: try --duration-s {longer}",
                 ratio * 100.0
             );
@@ -235,12 +245,12 @@ pub fn run(args: PlanArgs) -> u8 {
         .clone()
         .unwrap_or_else(|| PathBuf::from(format!("{}-{}m.npz", req.preset.name(), args.range_m)));
     if let Err(e) = npz::save(&out, &plan.trajectory, !args.uncompressed) {
-        eprintln!("hitl plan: cannot write {}: {e}", out.display());
+        crate::errln!("hitl plan: cannot write {}: {e}", out.display());
         return exit::BAD_INPUT;
     }
     if args.json {
         let v = serde_json::json!({ "out": out.display().to_string(), "summary": plan.summary });
-        println!("{v}");
+        crate::outln!("{v}");
     } else {
         print_summary(&plan.summary, &out);
     }

@@ -24,30 +24,30 @@ pub fn run(args: ReportArgs) -> u8 {
         Ok(r) => {
             if args.json {
                 match serde_json::to_string(&r.summary) {
-                    Ok(s) => println!("{s}"),
+                    Ok(s) => crate::outln!("{s}"),
                     Err(e) => {
-                        eprintln!("hitl report: {e}");
+                        crate::errln!("hitl report: {e}");
                         return exit::BAD_INPUT;
                     }
                 }
             } else {
                 if !r.summary.complete {
-                    eprintln!(
+                    crate::errln!(
                         "hitl report: {} was cut short ({}); reporting what it holds",
                         args.recording.display(),
                         r.summary.truncated.as_deref().unwrap_or("no footer")
                     );
                 }
-                println!("{}", r.dir.join("index.html").display());
+                crate::outln!("{}", r.dir.join("index.html").display());
             }
             exit::OK
         }
         Err(e @ ReportError::Read(_)) => {
-            eprintln!("hitl report: {e}");
+            crate::errln!("hitl report: {e}");
             exit::BAD_INPUT
         }
         Err(e) => {
-            eprintln!("hitl report: {e}");
+            crate::errln!("hitl report: {e}");
             exit::BAD_INPUT
         }
     }

@@ -85,7 +85,7 @@ fn confirm_enclosure_clear(host: &str) -> Option<bool> {
     if !std::io::stdin().is_terminal() {
         return None;
     }
-    eprint!(
+    crate::err!(
         "About to move the REAL arm at {host}. Is the enclosure clear and the door closed? [y/N] "
     );
     let _ = std::io::stderr().flush();
@@ -107,7 +107,7 @@ pub fn run(args: RunArgs, record: bool) -> u8 {
         Some(path) => match LabConfig::load(path) {
             Ok(lab) => lab,
             Err(e) => {
-                eprintln!("hitl run: {e}");
+                crate::errln!("hitl run: {e}");
                 return exit::BAD_INPUT;
             }
         },
@@ -117,18 +117,20 @@ pub fn run(args: RunArgs, record: bool) -> u8 {
         None => ArmTarget::Stub { faults: args.stub_faults.clone() },
         Some(host) => {
             if !args.stub_faults.is_empty() {
-                eprintln!("hitl run: --stub-fault only applies to the embedded stub, not to --arm");
+                crate::errln!(
+                    "hitl run: --stub-fault only applies to the embedded stub, not to --arm"
+                );
                 return exit::BAD_INPUT;
             }
             if !args.yes {
                 match confirm_enclosure_clear(host) {
                     Some(true) => {}
                     Some(false) => {
-                        eprintln!("hitl run: not confirmed; nothing moved");
+                        crate::errln!("hitl run: not confirmed; nothing moved");
                         return exit::BAD_INPUT;
                     }
                     None => {
-                        eprintln!(
+                        crate::errln!(
                             "hitl run: refusing to move the real arm at {host}: no terminal to confirm \
                              the enclosure is clear (pass --yes if it is)"
                         );
@@ -167,11 +169,11 @@ pub fn run(args: RunArgs, record: bool) -> u8 {
     };
     match session::run(request) {
         Ok(report) => {
-            println!("{}", report.summary());
+            crate::outln!("{}", report.summary());
             report.exit_code
         }
         Err(e) => {
-            eprintln!("hitl run: {e}");
+            crate::errln!("hitl run: {e}");
             e.exit_code()
         }
     }

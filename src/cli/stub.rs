@@ -78,32 +78,34 @@ pub fn run(args: StubArgs) -> u8 {
     let stub = match start(&args) {
         Ok(s) => s,
         Err((code, msg)) => {
-            eprintln!("hitl stub: {msg}");
+            crate::errln!("hitl stub: {msg}");
             return code;
         }
     };
-    eprintln!("hitl stub: xArm command port on {}", stub.cmd_addr());
+    crate::errln!("hitl stub: xArm command port on {}", stub.cmd_addr());
     for kind in ReportKind::ALL {
         if let Some(a) = stub.report_addr(kind) {
-            eprintln!("hitl stub: report {:?} ({} Hz) on {a}", kind, kind.rate_hz());
+            crate::errln!("hitl stub: report {:?} ({} Hz) on {a}", kind, kind.rate_hz());
         }
     }
     for f in &args.faults {
-        eprintln!("hitl stub: fault scheduled: {f}");
+        crate::errln!("hitl stub: fault scheduled: {f}");
     }
-    eprintln!("hitl stub: serving until Ctrl-C");
+    crate::errln!("hitl stub: serving until Ctrl-C");
     let (tx, rx) = mpsc::channel();
     if let Err(e) = ctrlc::set_handler(move || {
         let _ = tx.send(());
     }) {
-        eprintln!("hitl stub: cannot install the Ctrl-C handler: {e}");
+        crate::errln!("hitl stub: cannot install the Ctrl-C handler: {e}");
         return exit::DEVICE;
     }
     let _ = rx.recv();
     let phys = stub.physics();
-    eprintln!(
+    crate::errln!(
         "hitl stub: stopping after {:.1} s wall, {:.1} s simulated ({} late steps)",
-        phys.wall_s, phys.sim_s, phys.late_steps
+        phys.wall_s,
+        phys.sim_s,
+        phys.late_steps
     );
     stub.shutdown();
     exit::OK

@@ -10,6 +10,6 @@ pub struct StubArgs {
 }
 
 pub fn run(_args: StubArgs) -> u8 {
-    eprintln!("hitl stub: this build has no MuJoCo stub (built without the `stub` feature)");
+    crate::errln!("hitl stub: this build has no MuJoCo stub (built without the `stub` feature)");
     exit::BAD_INPUT
 }

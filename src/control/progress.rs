@@ -37,7 +37,7 @@ pub fn follow(status: &LoopStatus, program: &Program, plain: bool) {
             }
             None => {
                 if last_phase != Some(phase) || last_line.elapsed() >= Duration::from_secs(2) {
-                    eprintln!("tick {tick}/{total} {msg}");
+                    crate::errln!("tick {tick}/{total} {msg}");
                     last_line = std::time::Instant::now();
                     last_phase = Some(phase);
                 }

@@ -167,7 +167,7 @@ fn violations(report: &preflight::PreflightReport) -> String {
 fn prepare(req: &RunRequest) -> Result<(Trajectory, SetpointTable), RunError> {
     let loaded = npz::load(&req.trajectory).map_err(|e| RunError::BadInput(e.to_string()))?;
     for warning in &loaded.warnings {
-        eprintln!("warning: {warning}");
+        crate::errln!("warning: {warning}");
     }
     let traj = loaded.trajectory;
     let table = SetpointTable::build(&traj, req.rate_hz, req.speed_scale)
@@ -754,7 +754,7 @@ pub fn run(req: RunRequest) -> Result<RunReport, RunError> {
         exit_code = exit::INTERLOCK;
     }
     for line in &rt_report.fallbacks {
-        eprintln!("note: {line}");
+        crate::errln!("note: {line}");
     }
     Ok(RunReport {
         outcome,
