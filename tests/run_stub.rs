@@ -177,8 +177,9 @@ fn a_dropped_connection_holds_and_exits_5() {
     fault_case("drop-connection", 5, "device-fault", false);
 }
 
-#[test]
-fn ctrl_c_takes_a_controlled_stop_and_exits_130() {
+/// Plays the test trajectory, presses Ctrl-C `presses` times 20 ms apart once playback has
+/// begun, and checks the run ends in a controlled stop with exit 130 and a closed recording.
+fn ctrl_c_case(presses: usize) {
     let _one = ONE_AT_A_TIME.lock().unwrap_or_else(|e| e.into_inner());
     let dir = tempfile::tempdir().expect("tempdir");
     let traj = numpy_trajectory(dir.path());
@@ -194,14 +195,31 @@ fn ctrl_c_takes_a_controlled_stop_and_exits_130() {
         .expect("spawn hitl");
     // Wait until playback has begun, then press Ctrl-C.
     std::thread::sleep(std::time::Duration::from_millis(1500));
-    let status = Command::new("kill").args(["-INT", &child.id().to_string()]).status();
-    assert!(status.is_ok_and(|s| s.success()));
+    for _ in 0..presses {
+        let status = Command::new("kill").args(["-INT", &child.id().to_string()]).status();
+        assert!(status.is_ok_and(|s| s.success()));
+        std::thread::sleep(std::time::Duration::from_millis(20));
+    }
     let out = child.wait_with_output().expect("wait");
     assert_eq!(code(&out), 130, "{}", text(&out));
     let rec = read_recording(&mcap).expect("closed properly after Ctrl-C");
     assert!(rec.end.as_ref().is_some_and(|e| e.complete), "the file has its footer");
     assert!(rec.events.iter().any(|e| e.kind == "operator-stop"), "{:?}", rec.events);
     assert!(rec.setpoints.iter().any(|s| s.phase == Phase::Stop));
+    if presses == 2 {
+        assert!(text(&out).contains("controlled stop in progress"), "{}", text(&out));
+    }
+}
+
+#[test]
+fn ctrl_c_takes_a_controlled_stop_and_exits_130() {
+    ctrl_c_case(1);
+}
+
+#[test]
+fn a_second_ctrl_c_does_not_cut_the_controlled_stop_short() {
+    // Before, the second press ended the process at once: no footer, no completed stop.
+    ctrl_c_case(2);
 }
 
 #[test]

@@ -33,7 +33,7 @@ use hitl_trajectories::{npz, preflight, Trajectory};
 use sha2::Digest as _;
 use std::net::{IpAddr, SocketAddr, ToSocketAddrs};
 use std::path::PathBuf;
-use std::sync::atomic::{AtomicBool, Ordering};
+use std::sync::atomic::{AtomicBool, AtomicU32, Ordering};
 use std::sync::Arc;
 use std::time::{Duration, Instant};
 
@@ -808,12 +808,20 @@ fn connect_reports(
         .map_err(|e| RunError::Device(format!("arm report stream at {host}:{port}: {e}")))
 }
 
-/// Ctrl-C asks for a controlled stop; a second Ctrl-C is left to the default (ends the process).
+/// Ctrl-C asks for a controlled stop. An impatient second press must not cut that stop short
+/// (the arm would be left on whatever setpoint came last), so it only says what is happening; a
+/// third press abandons the stop and ends the process (exit 130), for a stop that cannot finish.
 fn install_ctrlc(operator_stop: &Arc<AtomicBool>) {
     let flag = Arc::clone(operator_stop);
+    let presses = AtomicU32::new(0);
     let _ = ctrlc::set_handler(move || {
-        if flag.swap(true, Ordering::AcqRel) {
-            std::process::exit(i32::from(exit::OPERATOR_STOP));
+        flag.store(true, Ordering::Release);
+        match presses.fetch_add(1, Ordering::AcqRel) {
+            0 => {}
+            1 => crate::errln!(
+                "hitl: controlled stop in progress; Ctrl-C once more abandons it and exits"
+            ),
+            _ => std::process::exit(i32::from(exit::OPERATOR_STOP)),
         }
     });
 }
