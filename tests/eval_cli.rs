@@ -45,6 +45,7 @@ fn write_recording(path: &Path, scale: Option<f64>) {
             mask: None,
             gt_pose: Some(pose(&gt(k))),
             tf: None,
+            trigger_ns: None,
         };
         assert!(tel.push_frame(frame));
         let error = match k {

@@ -57,9 +57,14 @@ fn one_image_set_and_one_ground_truth_per_capture_and_the_truth_lands_on_the_mas
     let captures = npz::load(&traj).expect("plan").trajectory.capture_count() as u64;
     assert!(captures >= 5, "{captures} captures");
     let rec = read_recording(&mcap).expect("recording");
-    for topic in
-        ["/camera/color", "/camera/depth", "/camera/mask", "/camera/calibration", "/pose/gt"]
-    {
+    for topic in [
+        "/camera/color",
+        "/camera/depth",
+        "/camera/mask",
+        "/camera/calibration",
+        "/camera/sync",
+        "/pose/gt",
+    ] {
         assert_eq!(
             rec.topic_counts.get(topic).copied(),
             Some(captures),
@@ -67,6 +72,19 @@ fn one_image_set_and_one_ground_truth_per_capture_and_the_truth_lands_on_the_mas
             rec.topic_counts
         );
     }
+
+    // Every frame's sync record: exposure after its trigger, the difference as written, and the
+    // largest one the one the run summary printed.
+    let mut ticks: Vec<u64> = rec.capture_sync.iter().map(|s| s.tick).collect();
+    ticks.dedup();
+    assert_eq!(ticks.len() as u64, captures, "one sync record per capture");
+    for s in &rec.capture_sync {
+        assert!(s.exposure_ns >= s.trigger_ns, "{s:?}");
+        assert_eq!((s.exposure_ns - s.trigger_ns) as i64, s.sync_error_ns);
+    }
+    let max_ms =
+        rec.capture_sync.iter().map(|s| s.sync_error_ns.abs()).max().unwrap_or(0) as f64 / 1e6;
+    assert!(out.contains(&format!("max {max_ms:.2} ms")), "max {max_ms:.2} ms not in: {out}");
 
     // WFOV at 320x256: f = 1545 * 320 / 1280, principal point at the centre.
     let (f, cx, cy) = (1545.0 * 320.0 / 1280.0, 160.0, 128.0);

@@ -35,6 +35,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
             mask: f.mask.clone().map(plane),
             gt_pose: Some(Pose::from_matrix(&m)),
             tf: None,
+            trigger_ns: None,
         });
         let mut est = Pose::from_matrix(&m);
         if i > 0 {

@@ -42,6 +42,7 @@ fn recorded_frames_replay_through_the_tracker() {
             mask: f.mask.clone().map(plane),
             gt_pose: Some(rec_pose(&gt)),
             tf: None,
+            trigger_ns: None,
         };
         while !tel.frame_queue_has_room() {
             std::thread::sleep(std::time::Duration::from_millis(2));

@@ -71,6 +71,24 @@ pub struct TimingMsg {
     pub overrun: bool,
 }
 
+/// `/camera/sync`: when a capture was triggered, when it was exposed, and the difference (the
+/// hard sync's error; positive when the exposure came after the trigger). Host monotonic ns.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+pub struct CaptureSyncMsg {
+    pub tick: u64,
+    pub trigger_ns: u64,
+    pub exposure_ns: u64,
+    pub sync_error_ns: i64,
+}
+
+impl CaptureSyncMsg {
+    pub fn new(tick: u64, trigger_ns: u64, exposure_ns: u64) -> Self {
+        let sync_error_ns = (i128::from(exposure_ns) - i128::from(trigger_ns))
+            .clamp(i128::from(i64::MIN), i128::from(i64::MAX)) as i64;
+        CaptureSyncMsg { tick, trigger_ns, exposure_ns, sync_error_ns }
+    }
+}
+
 /// `/light/state`: the lab light's commanded level.
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
 pub struct LightMsg {
@@ -380,13 +398,16 @@ pub struct FrameRecord {
     pub gt_pose: Option<Pose>,
     /// The transforms at capture time.
     pub tf: Option<TfMsg>,
+    /// When the tick fired the trigger (host monotonic ns): with `capture_ns` it gives the frame's
+    /// `/camera/sync` record. `None` writes none.
+    pub trigger_ns: Option<u64>,
 }
 
 impl FrameRecord {
     /// Take a camera frame (no pixel copies).
     pub fn from_rgbd(frame: RgbdFrame) -> Self {
         let i = frame.intrinsics;
-        let CaptureRequest { tick, .. } = frame.request;
+        let CaptureRequest { tick, fired_ns } = frame.request;
         Self {
             tick,
             capture_ns: frame.exposure_ns,
@@ -400,6 +421,7 @@ impl FrameRecord {
             mask: frame.mask.map(|m| Plane { width: i.width, height: i.height, data: m }),
             gt_pose: None,
             tf: None,
+            trigger_ns: Some(fired_ns),
         }
     }
 }

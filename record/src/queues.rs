@@ -207,6 +207,7 @@ mod tests {
             mask: None,
             gt_pose: None,
             tf: None,
+            trigger_ns: None,
         }
     }
 

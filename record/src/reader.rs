@@ -3,7 +3,9 @@
 //! `hitl eval`.
 
 use crate::error::ReadError;
-use crate::msg::{ArmStateMsg, LightMsg, Pose, PoseStamped, SetpointMsg, TfMsg, TimingMsg};
+use crate::msg::{
+    ArmStateMsg, CaptureSyncMsg, LightMsg, Pose, PoseStamped, SetpointMsg, TfMsg, TimingMsg,
+};
 use crate::topics;
 use foxglove::messages as fg;
 use mcap::records::Record;
@@ -128,6 +130,8 @@ pub struct Recording {
     pub states: Vec<ArmStateMsg>,
     pub timing: Vec<TimingMsg>,
     pub lights: Vec<LightMsg>,
+    /// `/camera/sync`, one per recorded frame, in trigger order.
+    pub capture_sync: Vec<CaptureSyncMsg>,
     pub events: Vec<EventRecord>,
     pub tf: Vec<TfMsg>,
     pub pose_gt: Vec<PoseStamped>,
@@ -267,6 +271,7 @@ pub fn read_recording(path: &Path) -> Result<Recording, ReadError> {
     rec.states.sort_by_key(|m| m.t_ns);
     rec.timing.sort_by_key(|m| m.t_ns);
     rec.lights.sort_by_key(|m| m.t_ns);
+    rec.capture_sync.sort_by_key(|m| m.trigger_ns);
     rec.events.sort_by_key(|m| m.t_ns);
     rec.tf.sort_by_key(|m| m.t_ns);
     rec.pose_gt.sort_by_key(|m| m.capture_ns);
@@ -282,6 +287,9 @@ fn decode_into(rec: &mut Recording, m: &RawMessage<'_>) -> Result<(), String> {
         topics::STATE => rec.states.push(serde_json::from_slice(m.data).map_err(|x| e(&x))?),
         topics::TIMING => rec.timing.push(serde_json::from_slice(m.data).map_err(|x| e(&x))?),
         topics::LIGHT => rec.lights.push(serde_json::from_slice(m.data).map_err(|x| e(&x))?),
+        topics::CAPTURE_SYNC => {
+            rec.capture_sync.push(serde_json::from_slice(m.data).map_err(|x| e(&x))?)
+        }
         topics::EVENT => rec.events.push(serde_json::from_slice(m.data).map_err(|x| e(&x))?),
         topics::RECORDER_STATS => {
             rec.recorder_stats.push(serde_json::from_slice(m.data).map_err(|x| e(&x))?)

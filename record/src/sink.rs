@@ -7,8 +7,8 @@
 use crate::error::RecordError;
 use crate::metadata::RunMetadata;
 use crate::msg::{
-    metres_to_mm, ArmStateMsg, DepthImage, EventDetail, FrameRecord, LightMsg, Pose, PoseStamped,
-    SafetyEventMsg, SetpointMsg, TfMsg, TimingMsg,
+    metres_to_mm, ArmStateMsg, CaptureSyncMsg, DepthImage, EventDetail, FrameRecord, LightMsg,
+    Pose, PoseStamped, SafetyEventMsg, SetpointMsg, TfMsg, TimingMsg,
 };
 use crate::topics;
 use foxglove::messages as fg;
@@ -35,10 +35,11 @@ pub(crate) enum Ch {
     Depth,
     Mask,
     Calibration,
+    CaptureSync,
     Stats,
 }
 
-pub(crate) const CHANNELS: [Ch; 13] = [
+pub(crate) const CHANNELS: [Ch; 14] = [
     Ch::Setpoint,
     Ch::State,
     Ch::Timing,
@@ -51,6 +52,7 @@ pub(crate) const CHANNELS: [Ch; 13] = [
     Ch::Depth,
     Ch::Mask,
     Ch::Calibration,
+    Ch::CaptureSync,
     Ch::Stats,
 ];
 
@@ -69,6 +71,7 @@ impl Ch {
             Ch::Depth => topics::DEPTH,
             Ch::Mask => topics::MASK,
             Ch::Calibration => topics::CALIBRATION,
+            Ch::CaptureSync => topics::CAPTURE_SYNC,
             Ch::Stats => topics::RECORDER_STATS,
         }
     }
@@ -366,6 +369,9 @@ impl McapSink {
             p: vec![i.fx, 0.0, i.cx, 0.0, 0.0, i.fy, i.cy, 0.0, 0.0, 0.0, 1.0, 0.0],
         };
         self.proto(Ch::Calibration, t, &cal)?;
+        if let Some(trigger_ns) = f.trigger_ns {
+            self.json(Ch::CaptureSync, t, &CaptureSyncMsg::new(f.tick, trigger_ns, t))?;
+        }
         if let Some(tf) = &f.tf {
             let mut tf = *tf;
             tf.t_ns = t;

@@ -12,6 +12,8 @@ pub const COLOR: &str = "/camera/color";
 pub const DEPTH: &str = "/camera/depth";
 pub const MASK: &str = "/camera/mask";
 pub const CALIBRATION: &str = "/camera/calibration";
+/// Extension: each frame's trigger and exposure times and their difference (the sync error).
+pub const CAPTURE_SYNC: &str = "/camera/sync";
 /// Extension: the recorder's own counters, once a second and at close.
 pub const RECORDER_STATS: &str = "/recorder/stats";
 
@@ -56,6 +58,10 @@ pub(crate) fn json_schema(topic: &str) -> Option<(&'static str, String)> {
         EVENT => (
             "hitl.SafetyEvent",
             r#"{"type":"object","properties":{"t_ns":{"type":"integer"},"kind":{"type":"string"},"detail":{"type":"string"},"tick":{"type":"integer"},"joint":{"type":"integer"},"value":{"type":"number"},"limit":{"type":"number"}},"required":["t_ns","kind","detail"]}"#.to_string(),
+        ),
+        CAPTURE_SYNC => (
+            "hitl.CaptureSync",
+            r#"{"type":"object","properties":{"tick":{"type":"integer"},"trigger_ns":{"type":"integer"},"exposure_ns":{"type":"integer"},"sync_error_ns":{"type":"integer"}},"required":["tick","trigger_ns","exposure_ns","sync_error_ns"]}"#.to_string(),
         ),
         RECORDER_STATS => (
             "hitl.RecorderStats",

@@ -90,6 +90,7 @@ fn synthetic_run_reads_in_python_and_rust() {
         "/camera/depth",
         "/camera/mask",
         "/camera/calibration",
+        "/camera/sync",
         "/tf",
         "/pose/gt",
         "/pose/estimate",
@@ -111,6 +112,12 @@ fn synthetic_run_reads_in_python_and_rust() {
         assert_eq!(count(&v, t), FRAMES, "{t}");
     }
     assert_eq!(count(&v, "/tf"), FRAMES);
+    assert_eq!(count(&v, "/camera/sync"), FRAMES);
+    let sync = &v["samples"]["/camera/sync"];
+    assert_eq!(sync["tick"], 0);
+    assert_eq!(sync["exposure_ns"].as_u64(), Some(T0));
+    assert_eq!(sync["trigger_ns"].as_u64(), Some(T0 - 2_000_000));
+    assert_eq!(sync["sync_error_ns"], 2_000_000);
     assert_eq!(count(&v, "/pose/gt"), FRAMES);
     assert_eq!(count(&v, "/pose/estimate"), FRAMES);
     assert_eq!(v["encodings"]["/camera/depth"][2], "foxglove.RawImage");
@@ -157,6 +164,13 @@ fn synthetic_run_reads_in_python_and_rust() {
     assert_eq!(rec.states.len() as u64, TICKS);
     assert_eq!(rec.timing.iter().filter(|t| t.overrun).count(), 1);
     assert_eq!(rec.tf.len() as u64, FRAMES);
+    assert_eq!(rec.capture_sync.len() as u64, FRAMES);
+    assert_eq!(rec.capture_sync[1].tick, 10);
+    assert_eq!(rec.capture_sync[1].sync_error_ns, 2_001_000);
+    assert_eq!(
+        rec.capture_sync[1].exposure_ns - rec.capture_sync[1].trigger_ns,
+        rec.capture_sync[1].sync_error_ns as u64
+    );
     assert_eq!(rec.tf[1], tf_at(T0 + 30 * 4_000_000, 1));
     assert_eq!(rec.pose_gt.len() as u64, FRAMES);
     assert_eq!(rec.pose_gt[2].capture_ns, rec.pose_estimate[2].capture_ns);

@@ -87,6 +87,10 @@ fn report_of_a_synthetic_run() {
     assert!((late.p50 - 10.0).abs() < 1e-9);
     assert!((late.max - 100.0).abs() < 1e-9);
     assert!((late.mean - 19.0).abs() < 1e-9);
+    // Frame k was exposed 2 ms + k us after its trigger (tests/common).
+    let sync = s.capture_sync_ms.as_ref().expect("capture sync");
+    assert_eq!(sync.count, 20);
+    assert!((sync.mean - 2.0095).abs() < 1e-9 && (sync.max - 2.019).abs() < 1e-9, "{sync:?}");
     let pe = s.pose_error.as_ref().expect("pose error");
     assert_eq!(pe.pairs, 20);
     let tmm = pe.translation_mm.as_ref().expect("translation");

@@ -115,6 +115,12 @@ fn index_html(mcap: &Path, s: &Summary, plots: &[(&str, &str)]) -> String {
             l.p50, l.p99, l.max, s.timing.overruns, s.timing.ticks
         ));
     }
+    if let Some(c) = &s.capture_sync_ms {
+        h.push_str(&format!(
+            "<tr><th>capture sync error</th><td>{} frames: mean {:.2} ms, p99 {:.2} ms, max {:.2} ms (exposure minus trigger)</td></tr>",
+            c.count, c.mean, c.p99, c.max
+        ));
+    }
     if let Some(p) = &s.pose_error {
         if let (Some(t), Some(r)) = (&p.translation_mm, &p.rotation_deg) {
             h.push_str(&format!(

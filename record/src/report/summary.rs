@@ -85,6 +85,8 @@ pub struct Summary {
     pub setpoints_by_phase: BTreeMap<String, usize>,
     pub tracking: Option<Tracking>,
     pub timing: LoopTiming,
+    /// Capture sync error (exposure minus trigger, `/camera/sync`), milliseconds.
+    pub capture_sync_ms: Option<Spread>,
     pub pose_error: Option<PoseError>,
     pub events: Vec<EventLine>,
     pub trajectory_sha256: Option<String>,
@@ -218,6 +220,9 @@ pub fn summarize(rec: &Recording) -> Summary {
             wake_late_us: Spread::of(&late),
             tick_us: Spread::of(&work),
         },
+        capture_sync_ms: Spread::of(
+            &rec.capture_sync.iter().map(|s| s.sync_error_ns as f64 / 1e6).collect::<Vec<_>>(),
+        ),
         pose_error,
         events: rec
             .events
