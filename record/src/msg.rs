@@ -113,8 +113,6 @@ pub enum EventKind {
     DoorOpen,
     /// Ctrl-C or the operator's stop.
     OperatorStop,
-    /// The tick missed its period.
-    Overrun,
     /// A joint outside its limits (with margin).
     JointLimit,
     /// A capture whose frame could not be queued for recording.
@@ -144,7 +142,6 @@ impl EventKind {
             Self::EStop => "e-stop",
             Self::DoorOpen => "door-open",
             Self::OperatorStop => "operator-stop",
-            Self::Overrun => "overrun",
             Self::JointLimit => "joint-limit",
             Self::CaptureNotRecorded => "capture-not-recorded",
             Self::FrameMalformed => "frame-malformed",
