@@ -5,6 +5,9 @@
 //! carry their pixel buffers and are built outside the tick by the camera intake.
 
 use hitl_hal::{ArmState, CaptureRequest, Intrinsics, RgbdFrame, DOF};
+use nalgebra::{
+    Isometry3, Matrix3, Point3, Quaternion, Rotation3, Translation3, UnitQuaternion, Vector3,
+};
 use serde::{Deserialize, Serialize};
 
 /// Which part of a run a setpoint belongs to.
@@ -217,107 +220,64 @@ pub struct Pose {
 impl Pose {
     pub const IDENTITY: Pose = Pose { translation: [0.0; 3], rotation: [0.0, 0.0, 0.0, 1.0] };
 
+    /// As an nalgebra isometry (the quaternion re-normalised).
+    pub fn isometry(&self) -> Isometry3<f64> {
+        let [x, y, z, w] = self.rotation;
+        Isometry3::from_parts(
+            Translation3::from(Vector3::from(self.translation)),
+            UnitQuaternion::from_quaternion(Quaternion::new(w, x, y, z)),
+        )
+    }
+
+    /// From an nalgebra isometry.
+    pub fn from_isometry(iso: &Isometry3<f64>) -> Pose {
+        let q = iso.rotation.coords; // x, y, z, w
+        Pose { translation: iso.translation.vector.into(), rotation: [q.x, q.y, q.z, q.w] }
+    }
+
     /// From a homogeneous 4x4 matrix (row-major, rotation part orthonormal).
     pub fn from_matrix(m: &[[f64; 4]; 4]) -> Self {
-        let r = |i: usize, j: usize| m[i][j];
-        let trace = r(0, 0) + r(1, 1) + r(2, 2);
-        let (x, y, z, w);
-        if trace > 0.0 {
-            let s = (trace + 1.0).sqrt() * 2.0;
-            w = 0.25 * s;
-            x = (r(2, 1) - r(1, 2)) / s;
-            y = (r(0, 2) - r(2, 0)) / s;
-            z = (r(1, 0) - r(0, 1)) / s;
-        } else if r(0, 0) > r(1, 1) && r(0, 0) > r(2, 2) {
-            let s = (1.0 + r(0, 0) - r(1, 1) - r(2, 2)).sqrt() * 2.0;
-            w = (r(2, 1) - r(1, 2)) / s;
-            x = 0.25 * s;
-            y = (r(0, 1) + r(1, 0)) / s;
-            z = (r(0, 2) + r(2, 0)) / s;
-        } else if r(1, 1) > r(2, 2) {
-            let s = (1.0 + r(1, 1) - r(0, 0) - r(2, 2)).sqrt() * 2.0;
-            w = (r(0, 2) - r(2, 0)) / s;
-            x = (r(0, 1) + r(1, 0)) / s;
-            y = 0.25 * s;
-            z = (r(1, 2) + r(2, 1)) / s;
-        } else {
-            let s = (1.0 + r(2, 2) - r(0, 0) - r(1, 1)).sqrt() * 2.0;
-            w = (r(1, 0) - r(0, 1)) / s;
-            x = (r(0, 2) + r(2, 0)) / s;
-            y = (r(1, 2) + r(2, 1)) / s;
-            z = 0.25 * s;
-        }
-        let n = (x * x + y * y + z * z + w * w).sqrt();
-        Self { translation: [m[0][3], m[1][3], m[2][3]], rotation: [x / n, y / n, z / n, w / n] }
+        let r = Matrix3::from_fn(|i, j| m[i][j]);
+        let q = UnitQuaternion::from_rotation_matrix(&Rotation3::from_matrix_unchecked(r));
+        let t = Translation3::new(m[0][3], m[1][3], m[2][3]);
+        Pose::from_isometry(&Isometry3::from_parts(t, q))
     }
 
     /// The rotation as a row-major 3x3 matrix.
     pub fn rotation_matrix(&self) -> [[f64; 3]; 3] {
-        let [x, y, z, w] = self.rotation;
-        [
-            [1.0 - 2.0 * (y * y + z * z), 2.0 * (x * y - z * w), 2.0 * (x * z + y * w)],
-            [2.0 * (x * y + z * w), 1.0 - 2.0 * (x * x + z * z), 2.0 * (y * z - x * w)],
-            [2.0 * (x * z - y * w), 2.0 * (y * z + x * w), 1.0 - 2.0 * (x * x + y * y)],
-        ]
+        let r = self.isometry().rotation.to_rotation_matrix();
+        std::array::from_fn(|i| std::array::from_fn(|j| r[(i, j)]))
     }
 
     /// The homogeneous 4x4 matrix (row-major).
     pub fn to_matrix(&self) -> [[f64; 4]; 4] {
-        let r = self.rotation_matrix();
-        let t = self.translation;
-        [
-            [r[0][0], r[0][1], r[0][2], t[0]],
-            [r[1][0], r[1][1], r[1][2], t[1]],
-            [r[2][0], r[2][1], r[2][2], t[2]],
-            [0.0, 0.0, 0.0, 1.0],
-        ]
+        let m = self.isometry().to_homogeneous();
+        std::array::from_fn(|i| std::array::from_fn(|j| m[(i, j)]))
     }
 
     /// `self * other` (apply `other` first).
     pub fn compose(&self, other: &Pose) -> Pose {
-        let [ax, ay, az, aw] = self.rotation;
-        let [bx, by, bz, bw] = other.rotation;
-        let q = [
-            aw * bx + ax * bw + ay * bz - az * by,
-            aw * by - ax * bz + ay * bw + az * bx,
-            aw * bz + ax * by - ay * bx + az * bw,
-            aw * bw - ax * bx - ay * by - az * bz,
-        ];
-        let p = self.transform_point(other.translation);
-        Pose { translation: p, rotation: q }
+        Pose::from_isometry(&(self.isometry() * other.isometry()))
     }
 
     /// The inverse transform.
     pub fn inverse(&self) -> Pose {
-        let [x, y, z, w] = self.rotation;
-        let inv = Pose { translation: [0.0; 3], rotation: [-x, -y, -z, w] };
-        let t = inv.transform_point(self.translation);
-        Pose { translation: [-t[0], -t[1], -t[2]], rotation: inv.rotation }
+        Pose::from_isometry(&self.isometry().inverse())
     }
 
     /// Map a point of the child frame into the parent frame.
     pub fn transform_point(&self, p: [f64; 3]) -> [f64; 3] {
-        let r = self.rotation_matrix();
-        let t = self.translation;
-        [
-            r[0][0] * p[0] + r[0][1] * p[1] + r[0][2] * p[2] + t[0],
-            r[1][0] * p[0] + r[1][1] * p[1] + r[1][2] * p[2] + t[1],
-            r[2][0] * p[0] + r[2][1] * p[1] + r[2][2] * p[2] + t[2],
-        ]
+        self.isometry().transform_point(&Point3::from(p)).coords.into()
     }
 
     /// Angle of the rotation between two poses, radians.
     pub fn angle_to(&self, other: &Pose) -> f64 {
-        let a = self.rotation;
-        let b = other.rotation;
-        let dot = (a[0] * b[0] + a[1] * b[1] + a[2] * b[2] + a[3] * b[3]).abs().min(1.0);
-        2.0 * dot.acos()
+        self.isometry().rotation.angle_to(&other.isometry().rotation)
     }
 
     /// Distance between the translations, metres.
     pub fn distance_to(&self, other: &Pose) -> f64 {
-        let d: f64 = (0..3).map(|i| (self.translation[i] - other.translation[i]).powi(2)).sum();
-        d.sqrt()
+        (Vector3::from(self.translation) - Vector3::from(other.translation)).norm()
     }
 }
 
