@@ -96,6 +96,14 @@ impl Default for IcpConfig {
     }
 }
 
+/// A debug line on stderr; a closed stderr loses it rather than panicking the worker.
+macro_rules! debug_line {
+    ($($arg:tt)*) => {{
+        use std::io::Write as _;
+        let _ = writeln!(std::io::stderr(), $($arg)*);
+    }};
+}
+
 /// `HITL_ICP_DEBUG` set: registration and tracking scores go to stderr (tuning on recordings
 /// with `hitl eval RUN.mcap --backend icp`).
 fn debug() -> bool {
@@ -241,7 +249,7 @@ impl IcpTracker {
         cands.sort_by(|a, b| b.0.total_cmp(&a.0));
         cands.truncate(self.cfg.coarse_keep);
         if debug() {
-            eprintln!("icp stage 1 {:?}", t0.elapsed());
+            debug_line!("icp stage 1 {:?}", t0.elapsed());
         }
         let mut cands: Vec<(f64, Pose)> =
             cands.iter().map(|(_, p)| rank(&dense, p, self.cfg.coarse_iters, 0.15 * d)).collect();
@@ -249,7 +257,7 @@ impl IcpTracker {
         cands.truncate(self.cfg.keep);
         if debug() {
             let s: Vec<String> = cands.iter().map(|c| format!("{:.3}", c.0)).collect();
-            eprintln!("icp registration candidates: {} ({:?})", s.join(" "), t0.elapsed());
+            debug_line!("icp registration candidates: {} ({:?})", s.join(" "), t0.elapsed());
         }
         let mut checked: Vec<Scored> =
             cands.iter().map(|(_, p)| self.full_check(frame, scene, p, Hidden::Miss)).collect();
@@ -264,7 +272,7 @@ impl IcpTracker {
         };
         if debug() {
             for c in &checked {
-                eprintln!(
+                debug_line!(
                     "icp checked: score {:.3} (inliers {:.3} silhouette {:.3} violation {:.3}) {:.1} deg from prior",
                     c.score(),
                     c.fit.inlier_frac,
@@ -348,7 +356,7 @@ impl PoseEstimator for IcpTracker {
         for start in &starts {
             let s = self.full_check(frame, &scene, start, Hidden::Skipped);
             if debug() {
-                eprintln!(
+                debug_line!(
                     "icp track {}: inliers {:.3} silhouette {:.3} violation {:.3} turn {:.2} deg",
                     frame.seq,
                     s.fit.inlier_frac,
@@ -372,7 +380,7 @@ impl PoseEstimator for IcpTracker {
         let reg = self.register(frame, &scene, &priors);
         if debug() {
             if let Some(s) = &reg {
-                eprintln!(
+                debug_line!(
                     "icp register: inliers {:.3} rms {:.2e} silhouette {:.3} violation {:.3} scene {}",
                     s.fit.inlier_frac,
                     s.fit.rms,
