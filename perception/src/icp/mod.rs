@@ -355,6 +355,9 @@ impl PoseEstimator for IcpTracker {
         };
         for start in &starts {
             let s = self.full_check(frame, &scene, start, Hidden::Skipped);
+            // ICP is local: a fit that turned further than the target can between captures slid
+            // into a look-alike pose.
+            let turn = rotation_distance(&s.fit.pose, start);
             if debug() {
                 debug_line!(
                     "icp track {}: inliers {:.3} silhouette {:.3} violation {:.3} turn {:.2} deg",
@@ -362,17 +365,15 @@ impl PoseEstimator for IcpTracker {
                     s.fit.inlier_frac,
                     s.silhouette,
                     s.violation,
-                    rotation_distance(&s.fit.pose, start).to_degrees()
+                    turn.to_degrees()
                 );
             }
-            // ICP is local: a fit that turned further than the target can between captures slid
-            // into a look-alike pose.
-            let turn = rotation_distance(&s.fit.pose, start);
             if self.acceptable(&s) && turn <= MAX_TURN_PER_FRAME_RAD {
                 return Ok(self.accept(&s, EstimateKind::Tracked));
             }
         }
-        // Without a track (reset, or lost): the last good pose carried on by its motion.
+        // Registration, its prior the track's prediction; without a track (reset, or lost) the
+        // last good pose carried on by its motion.
         let priors = match prediction {
             Some(pred) => vec![self.placed(&pred, &at), pred],
             None => self.carried_on(&at).into_iter().collect(),
