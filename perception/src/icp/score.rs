@@ -1,6 +1,7 @@
 //! Image-space checks of a pose hypothesis against the frame: does the projected model fall inside
 //! the target's silhouette, and does it stay behind the observed surface (free space)? Samples the
-//! image cannot judge (seen edge-on, or hidden behind another object) are left out.
+//! image cannot judge are left out: those seen edge-on, and, when tracking, those hidden behind
+//! another object ([`Hidden`]).
 
 use super::model::ModelCloud;
 use crate::pose::{self, Pose};
@@ -26,8 +27,8 @@ pub enum Hidden {
 /// Image-space agreement of a pose with the frame.
 #[derive(Debug, Clone, Copy)]
 pub struct ImageCheck {
-    /// Fraction of in-image model samples (not seen edge-on, not hidden behind another object)
-    /// that land on (or next to) a target pixel.
+    /// Fraction of the judged in-image model samples (not seen edge-on; with [`Hidden::Skipped`],
+    /// not behind another object) that land on (or next to) a target pixel.
     pub silhouette: f64,
     /// Fraction of those that lie in front of the observed surface by more than the tolerance.
     pub violation: f64,
