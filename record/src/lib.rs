@@ -24,8 +24,8 @@ pub use error::{ReadError, RecordError};
 pub use health::RecorderHealth;
 pub use metadata::{RunMetadata, SunPhaseTrack};
 pub use msg::{
-    ArmStateMsg, DepthImage, EventDetail, EventKind, FrameRecord, LightMsg, Phase, Plane, Pose,
-    PoseStamped, SafetyEventMsg, SetpointMsg, TfMsg, TimingMsg,
+    ArmStateMsg, CaptureSyncMsg, DepthImage, EventDetail, EventKind, FrameRecord, LightMsg, Phase,
+    Plane, Pose, PoseStamped, SafetyEventMsg, SetpointMsg, TfMsg, TimingMsg,
 };
 pub use queues::{QueueCapacity, Telemetry};
 pub use recorder::{RecordSummary, Recorder, RecorderConfig, RecorderHandle};

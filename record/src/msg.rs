@@ -86,9 +86,14 @@ pub struct CaptureSyncMsg {
 
 impl CaptureSyncMsg {
     pub fn new(tick: u64, trigger_ns: u64, exposure_ns: u64) -> Self {
-        let sync_error_ns = (i128::from(exposure_ns) - i128::from(trigger_ns))
-            .clamp(i128::from(i64::MIN), i128::from(i64::MAX)) as i64;
+        let sync_error_ns = Self::error_ns(trigger_ns, exposure_ns);
         CaptureSyncMsg { tick, trigger_ns, exposure_ns, sync_error_ns }
+    }
+
+    /// The sync error: exposure minus trigger, nanoseconds (the one definition, also used for the
+    /// run summary's figures).
+    pub fn error_ns(trigger_ns: u64, exposure_ns: u64) -> i64 {
+        (exposure_ns as i64).saturating_sub(trigger_ns as i64)
     }
 }
 

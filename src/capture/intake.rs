@@ -9,7 +9,7 @@ use super::truth::{pose, LabFrames};
 use crate::control::telemetry::CaptureOut;
 use hitl_hal::RgbdFrame;
 use hitl_perception::{PerceptionFrame, WorkerHandle};
-use hitl_record::{EventKind, FrameRecord, SafetyEventMsg, Telemetry};
+use hitl_record::{CaptureSyncMsg, EventKind, FrameRecord, SafetyEventMsg, Telemetry};
 use std::collections::VecDeque;
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::Arc;
@@ -158,7 +158,7 @@ impl Worker {
         self.stats.frames += 1;
         let request = frame.request;
         let capture = self.captures.iter().find(|c| c.tick == request.tick).copied();
-        let sync_ns = frame.exposure_ns as i64 - request.fired_ns as i64;
+        let sync_ns = CaptureSyncMsg::error_ns(request.fired_ns, frame.exposure_ns);
         self.sync_sum_ns += sync_ns as f64;
         self.stats.sync_error_max_ns = self.stats.sync_error_max_ns.max(sync_ns.unsigned_abs());
         self.stats.sync_error_mean_ns = self.sync_sum_ns / self.stats.frames as f64;

@@ -7,8 +7,8 @@
 
 use crate::exit;
 use hitl_perception::estimator::BackendSpec;
-use hitl_perception::metrics::{evaluate, PosePair};
-use hitl_perception::pose::{self, Pose};
+use hitl_perception::metrics::{evaluate, frame_error, PosePair};
+use hitl_perception::pose::Pose;
 use hitl_perception::replay::replay_frames;
 use hitl_perception::{backend_from_spec, TargetModel};
 use std::collections::HashMap;
@@ -185,16 +185,10 @@ fn per_frame(pairs: &[PosePair], m: &hitl_perception::metrics::Metrics) -> serde
             match scored.get(&p.timestamp_ns) {
                 Some((et, er)) => serde_json::json!({
                     "timestamp_ns": p.timestamp_ns, "t_s": t_s, "et_m": et, "er_deg": er,
-                    "raw_er_deg": p.est.map(|e| raw_rotation_error_deg(&e, &p.gt)),
+                    "raw_er_deg": p.est.map(|e| frame_error(&e, &p.gt, 1.0).1),
                 }),
                 None => serde_json::json!({ "timestamp_ns": p.timestamp_ns, "t_s": t_s }),
             }
         })
         .collect()
-}
-
-/// Angle between the estimated and true rotations, degrees, with no calibration applied.
-fn raw_rotation_error_deg(est: &Pose, gt: &Pose) -> f64 {
-    let r = pose::rotation(est).transpose() * pose::rotation(gt);
-    pose::rotation_angle(&r).to_degrees()
 }
