@@ -23,6 +23,9 @@ pub enum FaultKind {
     DropConnection,
     /// Stop the reports for this many seconds (`None`: until the stub stops).
     StallReports(Option<f64>),
+    /// Stop reading and answering commands for this many seconds (`None`: until the stub
+    /// stops); the connection and the reports go on.
+    StallReplies(Option<f64>),
     /// Raise this controller error code.
     ArmError(u8),
     /// Add this offset (rad) to every reported joint.
@@ -41,6 +44,7 @@ impl FaultKind {
         match self {
             FaultKind::DropConnection => "drop-connection",
             FaultKind::StallReports(_) => "stall-reports",
+            FaultKind::StallReplies(_) => "stall-replies",
             FaultKind::ArmError(_) => "arm-error",
             FaultKind::Deviation(_) => "deviation",
             FaultKind::Estop => "estop",
@@ -59,7 +63,7 @@ pub struct Fault {
 
 /// Why a fault specification was refused.
 #[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
-#[error("bad stub fault '{spec}': {reason} (expected KIND[:VALUE]@SECONDS with KIND one of drop-connection, stall-reports, arm-error, deviation, estop, door-open)")]
+#[error("bad stub fault '{spec}': {reason} (expected KIND[:VALUE]@SECONDS with KIND one of drop-connection, stall-reports, stall-replies, arm-error, deviation, estop, door-open)")]
 pub struct FaultParseError {
     pub spec: String,
     pub reason: String,
@@ -85,16 +89,19 @@ impl FromStr for Fault {
                 .filter(|x| x.is_finite())
                 .ok_or_else(|| err("value is not a finite number"))
         };
+        let stall = |v: &str| -> Result<f64, FaultParseError> {
+            let s = number(v)?;
+            if s <= 0.0 {
+                return Err(err("stall duration must be > 0"));
+            }
+            Ok(s)
+        };
         let kind = match (name, value) {
             ("drop-connection", None) => FaultKind::DropConnection,
             ("stall-reports", None) => FaultKind::StallReports(None),
-            ("stall-reports", Some(v)) => {
-                let s = number(v)?;
-                if s <= 0.0 {
-                    return Err(err("stall duration must be > 0"));
-                }
-                FaultKind::StallReports(Some(s))
-            }
+            ("stall-reports", Some(v)) => FaultKind::StallReports(Some(stall(v)?)),
+            ("stall-replies", None) => FaultKind::StallReplies(None),
+            ("stall-replies", Some(v)) => FaultKind::StallReplies(Some(stall(v)?)),
             ("arm-error", None) => FaultKind::ArmError(DEFAULT_ARM_ERROR),
             ("arm-error", Some(v)) => match v.parse::<u8>() {
                 Ok(c) if c > 0 => FaultKind::ArmError(c),
@@ -117,6 +124,7 @@ impl fmt::Display for Fault {
     fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
         match self.kind {
             FaultKind::StallReports(Some(s)) => write!(f, "stall-reports:{s}@{}", self.at_s),
+            FaultKind::StallReplies(Some(s)) => write!(f, "stall-replies:{s}@{}", self.at_s),
             FaultKind::ArmError(c) => write!(f, "arm-error:{c}@{}", self.at_s),
             FaultKind::Deviation(d) => write!(f, "deviation:{d}@{}", self.at_s),
             k => write!(f, "{}@{}", k.name(), self.at_s),
@@ -200,12 +208,26 @@ mod tests {
             "stall-reports:0.5@3".parse::<Fault>().map(|f| f.kind),
             Ok(FaultKind::StallReports(Some(0.5)))
         );
+        assert_eq!(
+            "stall-replies@3".parse::<Fault>().map(|f| f.kind),
+            Ok(FaultKind::StallReplies(None))
+        );
+        assert_eq!(
+            "stall-replies:2@3".parse::<Fault>().map(|f| f.kind),
+            Ok(FaultKind::StallReplies(Some(2.0)))
+        );
         assert_eq!("door-open@4".parse::<Fault>().map(|f| f.kind), Ok(FaultKind::DoorOpen));
         assert_eq!(
             "drop-connection@4".parse::<Fault>().map(|f| f.kind),
             Ok(FaultKind::DropConnection)
         );
-        for f in ["deviation:0.1@2.5", "estop@1", "stall-reports:0.5@3", "arm-error:31@0"] {
+        for f in [
+            "deviation:0.1@2.5",
+            "estop@1",
+            "stall-reports:0.5@3",
+            "stall-replies:0.5@3",
+            "arm-error:31@0",
+        ] {
             let parsed: Fault = f.parse().expect("valid");
             assert_eq!(parsed.to_string().parse::<Fault>(), Ok(parsed));
         }
@@ -221,6 +243,7 @@ mod tests {
             "arm-error:0@1",
             "estop:1@1",
             "deviation:nan@1",
+            "stall-replies:0@1",
         ] {
             let e = bad.parse::<Fault>().expect_err(bad);
             assert!(e.to_string().contains(bad), "{e}");

@@ -6,7 +6,9 @@ mod protocol_common;
 
 use hitl_drivers::xarm::codes;
 use hitl_drivers::xarm::report::ReportKind;
-use hitl_drivers::xarm::{ClientConfig, ReportConfig, ReportReader, XarmClient, XarmError};
+use hitl_drivers::xarm::{
+    ClientConfig, ReportConfig, ReportReader, ServoReplies, XarmClient, XarmError,
+};
 use hitl_hal::{Arm, ArmReports, Error, ErrorKind, Inputs, Joints};
 use hitl_sim_stub::{FaultKind, Stub, StubConfig, StubError, StubHandle};
 use protocol_common::LagPlant;
@@ -203,6 +205,38 @@ fn stalled_reports_time_out_the_reader_and_arm_error_shows_up() {
         }
     };
     assert_eq!(err.kind(), ErrorKind::Timeout, "{err}");
+    stub.shutdown();
+}
+
+#[test]
+fn stalled_replies_fail_the_setpoint_after_the_allowed_backlog_and_then_recover() {
+    let stub = start(None);
+    let config = ClientConfig {
+        servo_replies: ServoReplies::Pipelined { max_outstanding: 10 },
+        ..ClientConfig::default()
+    };
+    let mut arm = XarmClient::connect(stub.cmd_addr(), config).expect("connects");
+    arm.enable_servo().expect("enables");
+    stream(&mut arm, &Q0, &Q0, 5).expect("answered while the box hears");
+
+    stub.inject(FaultKind::StallReplies(Some(0.5)));
+    std::thread::sleep(Duration::from_millis(20));
+    let mut sent = 0;
+    let err = loop {
+        match arm.servo_joint(&Q0) {
+            Ok(()) => sent += 1,
+            Err(e) => break e,
+        }
+        assert!(sent <= 10, "the eleventh unanswered setpoint must fail");
+    };
+    assert_eq!(sent, 10, "ten setpoints may await their replies");
+    assert!(matches!(err, XarmError::Backlog(10)), "{err}");
+    assert_eq!(err.kind(), ErrorKind::Timeout);
+
+    // The stall ends: the late replies arrive and the stream goes on.
+    std::thread::sleep(Duration::from_millis(600));
+    arm.flush_servo_replies().expect("the late replies arrive");
+    stream(&mut arm, &Q0, &Q0, 5).expect("answered again");
     stub.shutdown();
 }
 

@@ -32,7 +32,7 @@ pub struct StubArgs {
     #[arg(long, value_name = "FILE")]
     pub config: Option<PathBuf>,
     /// Inject a fault, `KIND[:VALUE]@SECONDS` after start (drop-connection, stall-reports,
-    /// arm-error, deviation, estop, door-open). Repeatable.
+    /// stall-replies, arm-error, deviation, estop, door-open). Repeatable.
     #[arg(long = "fault", value_name = "KIND@SECONDS")]
     pub faults: Vec<Fault>,
     /// Allow a non-loopback --bind (the stub then answers anyone on that network).

@@ -1,6 +1,6 @@
 //! The command port: accepts connections, cuts each byte stream into request frames, answers
 //! each through the box, and closes a connection on garbage, on shutdown or on a
-//! drop-connection fault.
+//! drop-connection fault. A stall-replies fault stops reading (and so answering) without closing.
 
 use super::{Shared, POLL};
 use hitl_drivers::xarm::codec::{
@@ -55,6 +55,11 @@ fn connection(shared: Arc<Shared>, mut stream: TcpStream) {
     loop {
         if shared.stopping() || shared.drop_epoch.load(Ordering::SeqCst) != epoch {
             break;
+        }
+        if shared.replies_stalled() {
+            // A box that hears nothing: requests wait in the socket, unanswered.
+            std::thread::sleep(POLL / 4);
+            continue;
         }
         match rx.fill_from(&mut stream) {
             Ok(0) => break,

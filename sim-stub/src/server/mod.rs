@@ -107,6 +107,9 @@ pub struct Shared {
     pub drop_epoch: AtomicU64,
     /// Reports are stalled until this many ns after start (u64::MAX: for good; 0: not stalled).
     pub stall_until_ns: AtomicU64,
+    /// The command port reads and answers nothing until this many ns after start (like
+    /// `stall_until_ns`); the connection stays open.
+    pub stall_replies_until_ns: AtomicU64,
     pub started: Instant,
     pub counters: Counters,
     pub physics_dt: f64,
@@ -126,6 +129,19 @@ impl Shared {
         self.stop.load(Ordering::SeqCst)
     }
 
+    /// The end of a stall lasting `seconds` from now (`None`: until the stub stops).
+    fn until(&self, seconds: Option<f64>) -> u64 {
+        match seconds {
+            Some(s) => self.elapsed_ns().saturating_add((s * 1e9) as u64),
+            None => u64::MAX,
+        }
+    }
+
+    /// Whether the command port is stalled now.
+    pub fn replies_stalled(&self) -> bool {
+        self.stall_replies_until_ns.load(Ordering::SeqCst) > self.elapsed_ns()
+    }
+
     /// Apply a fault now.
     pub fn apply(&self, kind: FaultKind) {
         match kind {
@@ -133,11 +149,10 @@ impl Shared {
                 self.drop_epoch.fetch_add(1, Ordering::SeqCst);
             }
             FaultKind::StallReports(d) => {
-                let until = match d {
-                    Some(s) => self.elapsed_ns().saturating_add((s * 1e9) as u64),
-                    None => u64::MAX,
-                };
-                self.stall_until_ns.store(until, Ordering::SeqCst);
+                self.stall_until_ns.store(self.until(d), Ordering::SeqCst)
+            }
+            FaultKind::StallReplies(d) => {
+                self.stall_replies_until_ns.store(self.until(d), Ordering::SeqCst)
             }
             FaultKind::ArmError(code) => self.lock_arm().raise_error(code),
             FaultKind::Deviation(rad) => self.lock_arm().set_deviation(rad),
@@ -190,6 +205,7 @@ impl Stub {
             stop: AtomicBool::new(false),
             drop_epoch: AtomicU64::new(0),
             stall_until_ns: AtomicU64::new(0),
+            stall_replies_until_ns: AtomicU64::new(0),
             started: Instant::now(),
             counters: Counters::default(),
             physics_dt: config.physics_dt,
