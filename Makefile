@@ -21,7 +21,7 @@ demo: setup
 test: setup test-rust lint
 
 test-rust:
-	$(CARGO) test --workspace --all-targets
+	$(CARGO) test --workspace --all-targets --no-fail-fast
 	$(CARGO) test --workspace --doc
 
 lint:

@@ -55,6 +55,8 @@ struct Script {
     deviate_after: Option<usize>,
     /// After this many commands, the connection fails.
     disconnect_after: Option<usize>,
+    /// After this many commands, the arm stops answering (the connection stays open).
+    unanswered_after: Option<usize>,
 }
 
 struct FakeArm {
@@ -76,6 +78,9 @@ impl Arm for FakeArm {
     fn servo_joint(&mut self, q: &Joints) -> Result<(), ErrorKind> {
         if self.script.disconnect_after.is_some_and(|n| self.sent.len() >= n) {
             return Err(ErrorKind::Disconnected);
+        }
+        if self.script.unanswered_after.is_some_and(|n| self.sent.len() >= n) {
+            return Err(ErrorKind::Timeout);
         }
         self.sent.push(*q);
         let mut measured = *q;
@@ -250,6 +255,20 @@ fn a_lost_connection_holds_and_exits_5() {
     let Outcome::Tripped { trip, stopped } = ran.outcome else { panic!("{:?}", ran.outcome) };
     assert_eq!(trip.kind, TripKind::ConnectionLost);
     assert!(!stopped);
+    assert!(ran.stopped, "the arm was told to stop");
+    assert_eq!(ran.sent.len(), n);
+    assert_eq!(trip.kind.exit_code(), 5);
+}
+
+#[test]
+fn an_arm_that_stops_answering_holds_and_exits_5() {
+    let _one = serial();
+    let p = program();
+    let n = p.approach.len() + 30;
+    let ran = run(&p, Script { unanswered_after: Some(n), ..Default::default() }, None);
+    let Outcome::Tripped { trip, stopped } = ran.outcome else { panic!("{:?}", ran.outcome) };
+    assert_eq!(trip.kind, TripKind::SetpointsUnanswered);
+    assert!(!stopped, "no stop trajectory to an arm that does not answer");
     assert!(ran.stopped, "the arm was told to stop");
     assert_eq!(ran.sent.len(), n);
     assert_eq!(trip.kind.exit_code(), 5);

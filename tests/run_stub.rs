@@ -11,7 +11,7 @@ use std::path::{Path, PathBuf};
 use std::process::{Command, Output, Stdio};
 
 mod common;
-use common::{hitl, SHARED_VM_LAB};
+use common::{hitl, SHARED_VM_LAB, SILENCE_LAB};
 use std::sync::Mutex;
 
 static ONE_AT_A_TIME: Mutex<()> = Mutex::new(());
@@ -65,9 +65,8 @@ fn run_with_camera(camera: &str, extra: &[&str]) -> Run {
         "sim",
         "--plain",
     ];
-    if !extra.iter().any(|a| a.starts_with("stall-reports")) {
-        args.extend_from_slice(&["--config", SHARED_VM_LAB]);
-    }
+    let silences = extra.iter().any(|a| a.starts_with("stall-"));
+    args.extend_from_slice(&["--config", if silences { SILENCE_LAB } else { SHARED_VM_LAB }]);
     args.extend_from_slice(extra);
     let out = hitl(&args);
     Run { out, mcap, _dir: dir, traj }
@@ -124,10 +123,23 @@ fn two_runs_emit_the_same_playback_setpoint_stream_bit_for_bit() {
 }
 
 /// Inject a fault 1.2 s into the run (during playback) and check exit code, stop and event.
-fn fault_case(fault: &str, exit: i32, event: &str, controlled_stop: bool) {
+fn fault_case(fault: &str, exit: i32, event: &str, controlled_stop: bool) -> String {
+    fault_case_with(fault, &[], exit, event, controlled_stop)
+}
+
+/// [`fault_case`] with more arguments for the run.
+fn fault_case_with(
+    fault: &str,
+    extra: &[&str],
+    exit: i32,
+    event: &str,
+    controlled_stop: bool,
+) -> String {
     let _one = ONE_AT_A_TIME.lock().unwrap_or_else(|e| e.into_inner());
     let spec = format!("{fault}@1.2");
-    let run = run_with(&["--stub-fault", &spec]);
+    let mut args = vec!["--stub-fault", &spec];
+    args.extend_from_slice(extra);
+    let run = run_with(&args);
     let all = text(&run.out);
     assert_eq!(code(&run.out), exit, "{fault}: {all}");
     let rec = read_recording(&run.mcap).expect("the recording stays readable");
@@ -145,6 +157,7 @@ fn fault_case(fault: &str, exit: i32, event: &str, controlled_stop: bool) {
     } else {
         assert_eq!(stops, 0, "{fault}: a hold sends no stop trajectory");
     }
+    all
 }
 
 #[test]
@@ -175,6 +188,12 @@ fn deviation_beyond_the_threshold_stops_and_exits_4() {
 #[test]
 fn a_dropped_connection_holds_and_exits_5() {
     fault_case("drop-connection", 5, "device-fault", false);
+}
+
+#[test]
+fn an_arm_that_stops_answering_setpoints_holds_and_exits_5() {
+    let all = fault_case("stall-replies", 5, "device-fault", false);
+    assert!(all.contains("stopped by setpoints-unanswered"), "{all}");
 }
 
 /// Starts playing the test trajectory with a recording, stdout and stderr piped; the temporary

@@ -66,7 +66,9 @@ fn phase(p: Phase) -> RecPhase {
 fn trip_event(trip: &Trip) -> SafetyEventMsg {
     let (kind, joint, value, limit) = match trip.kind {
         TripKind::ReportWatchdog { silent_ms } => (EventKind::ReportWatchdog, None, silent_ms, 0.0),
-        TripKind::ConnectionLost => (EventKind::DeviceFault, None, 0.0, 0.0),
+        TripKind::ConnectionLost | TripKind::SetpointsUnanswered => {
+            (EventKind::DeviceFault, None, 0.0, 0.0)
+        }
         TripKind::ArmError { code } => (EventKind::ArmError, None, f64::from(code), 0.0),
         TripKind::ArmWarning { code } => (EventKind::ArmWarning, None, f64::from(code), 0.0),
         TripKind::Deviation { joint, deviation_rad } => {

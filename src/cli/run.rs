@@ -51,7 +51,7 @@ pub struct RunArgs {
     #[arg(long, default_value = "asymmetric", value_name = "NAME|FILE")]
     pub target_model: String,
     /// Inject a stub fault at a time into the run (repeatable): drop-connection, stall-reports,
-    /// arm-error, deviation, estop, door-open; e.g. `--stub-fault estop@2.5`.
+    /// stall-replies, arm-error, deviation, estop, door-open; e.g. `--stub-fault estop@2.5`.
     #[arg(long = "stub-fault", value_name = "KIND@SECONDS")]
     pub stub_faults: Vec<String>,
     /// Do not ask for confirmation before moving a real arm (the enclosure is known to be clear).

@@ -11,8 +11,11 @@ use hitl_hal::{ArmState, InputState, Joints};
 pub enum TripKind {
     /// No arm report for longer than the watchdog allows.
     ReportWatchdog { silent_ms: f64 },
-    /// The command connection to the arm failed.
+    /// The command connection to the arm failed (closed, reset, unreadable bytes).
     ConnectionLost,
+    /// The connection is open but the arm stopped answering setpoints (or accepting them) for
+    /// longer than the silence the lab tolerates (`interlocks.report_timeout_ms`).
+    SetpointsUnanswered,
     /// The arm reports an error code.
     ArmError { code: u8 },
     /// The arm reports a warning code.
@@ -67,6 +70,7 @@ impl TripKind {
         match self {
             TripKind::ReportWatchdog { .. } => "report-watchdog",
             TripKind::ConnectionLost => "connection-lost",
+            TripKind::SetpointsUnanswered => "setpoints-unanswered",
             TripKind::ArmError { .. } => "arm-error",
             TripKind::ArmWarning { .. } => "arm-warning",
             TripKind::Deviation { .. } => "deviation",
@@ -81,10 +85,12 @@ impl TripKind {
     /// What the loop may still do.
     pub fn reaction(&self) -> Reaction {
         match self {
-            // The arm cannot hear us, has stopped itself on an error, or its power is cut.
-            TripKind::ConnectionLost | TripKind::ArmError { .. } | TripKind::EStop => {
-                Reaction::Hold
-            }
+            // The arm cannot hear us (or does not answer what it hears), has stopped itself on an
+            // error, or its power is cut.
+            TripKind::ConnectionLost
+            | TripKind::SetpointsUnanswered
+            | TripKind::ArmError { .. }
+            | TripKind::EStop => Reaction::Hold,
             _ => Reaction::ControlledStop,
         }
     }
@@ -93,7 +99,9 @@ impl TripKind {
     pub fn exit_code(&self) -> u8 {
         match self {
             TripKind::OperatorStop => exit::OPERATOR_STOP,
-            TripKind::ConnectionLost | TripKind::DeviceFailed { .. } => exit::DEVICE,
+            TripKind::ConnectionLost
+            | TripKind::SetpointsUnanswered
+            | TripKind::DeviceFailed { .. } => exit::DEVICE,
             _ => exit::INTERLOCK,
         }
     }
@@ -105,6 +113,10 @@ impl TripKind {
                 format!("no arm report for {silent_ms:.1} ms")
             }
             TripKind::ConnectionLost => "the command connection to the arm failed".into(),
+            TripKind::SetpointsUnanswered => {
+                "the arm stopped answering setpoints for longer than interlocks.report_timeout_ms"
+                    .into()
+            }
             TripKind::ArmError { code } => format!("the arm reports error code {code}"),
             TripKind::ArmWarning { code } => format!("the arm reports warning code {code}"),
             TripKind::Deviation { joint, deviation_rad } => format!(
@@ -144,6 +156,18 @@ impl Thresholds {
             report_timeout_ns: lab.interlocks.report_timeout_ms.saturating_mul(1_000_000),
             max_deviation_rad: lab.interlocks.max_deviation_rad,
             trip_on_warning: lab.interlocks.trip_on_warning,
+        }
+    }
+
+    /// How many setpoint replies may be missing before the arm counts as silent: as many as the
+    /// loop sends in `report_timeout` at `rate_hz` (25 at the defaults, 100 ms and 250 Hz), so a
+    /// silent command channel trips after the same silence as a silent report stream.
+    pub fn unanswered_setpoints(&self, rate_hz: f64) -> u32 {
+        let ticks = (self.report_timeout_ns as f64 * 1e-9 * rate_hz).ceil();
+        if ticks.is_finite() {
+            ticks.clamp(1.0, f64::from(u32::MAX)) as u32
+        } else {
+            1
         }
     }
 }
@@ -240,6 +264,17 @@ mod tests {
             max_deviation_rad: 0.08,
             trip_on_warning: true,
         })
+    }
+
+    #[test]
+    fn the_command_channel_may_be_silent_as_long_as_the_report_stream() {
+        assert_eq!(il().thresholds.unanswered_setpoints(250.0), 25);
+        assert_eq!(il().thresholds.unanswered_setpoints(100.0), 10);
+        let shared_vm = Thresholds { report_timeout_ns: 1_000_000_000, ..il().thresholds };
+        assert_eq!(shared_vm.unanswered_setpoints(250.0), 250);
+        let zero = Thresholds { report_timeout_ns: 0, ..il().thresholds };
+        assert_eq!(zero.unanswered_setpoints(250.0), 1, "at least one reply may be in flight");
+        assert_eq!(il().thresholds.unanswered_setpoints(f64::NAN), 1);
     }
 
     #[test]

@@ -236,6 +236,7 @@ where
                 ErrorKind::DeviceFault | ErrorKind::InvalidRequest => {
                     TripKind::ArmError { code: 0 }
                 }
+                ErrorKind::Timeout => TripKind::SetpointsUnanswered,
                 _ => TripKind::ConnectionLost,
             };
             return self.fail_while_sending(kind, k, now);

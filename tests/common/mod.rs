@@ -16,3 +16,7 @@ pub fn hitl(args: &[&str]) -> Output {
 /// itself (the file says why). Tests about those interlocks keep the defaults.
 pub const SHARED_VM_LAB: &str =
     concat!(env!("CARGO_MANIFEST_DIR"), "/tests/data/shared-vm-lab.toml");
+
+/// The default lab with 400 ms silence limits, for the tests that silence the arm: what they
+/// inject, not the host's scheduling, trips (the file says why).
+pub const SILENCE_LAB: &str = concat!(env!("CARGO_MANIFEST_DIR"), "/tests/data/silence-lab.toml");

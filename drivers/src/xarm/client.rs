@@ -29,7 +29,7 @@ const REPLY_DATA_CAP: usize = 128;
 /// How `servo_joint` treats the replies to its setpoints.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub enum ServoReplies {
-    /// Write and return; check replies as they arrive on later calls. Fails when more than
+    /// Write and return; check replies as they arrive on later calls. Fails when
     /// `max_outstanding` replies are missing (the box stopped answering).
     Pipelined { max_outstanding: u32 },
     /// Wait for each reply, like the official SDK (up to `reply_timeout`).

@@ -29,7 +29,7 @@ use arm_link::{connect_reports, first_report, resolve, spawn_report_reader};
 use devices::{
     collect_late_frames, open_devices, record_pose, start_recorder, target_scene, RunDevices,
 };
-use hitl_drivers::xarm::{ClientConfig, ReportKind, XarmClient};
+use hitl_drivers::xarm::{ClientConfig, ReportKind, ServoReplies, XarmClient};
 use hitl_hal::{Arm, Joints, MonotonicClock};
 use hitl_perception::{backend_from_spec, spawn_worker, BackendSpec, ReregisterPolicy};
 use hitl_record::{EventKind, PoseStamped, SafetyEventMsg};
@@ -264,8 +264,14 @@ pub fn run(req: RunRequest) -> Result<RunReport, RunError> {
     .map_err(|e| RunError::Device(format!("capture intake thread: {e}")))?;
 
     // Connect and enable the arm.
-    let mut arm = XarmClient::connect(cmd_addr, ClientConfig::default())
-        .map_err(|e| RunError::Device(format!("arm at {cmd_addr}: {e}")))?;
+    let thresholds = Thresholds::from_lab(&req.lab);
+    let replies =
+        ServoReplies::Pipelined { max_outstanding: thresholds.unanswered_setpoints(table.rate_hz) };
+    let mut arm = XarmClient::connect(
+        cmd_addr,
+        ClientConfig { servo_replies: replies, ..ClientConfig::default() },
+    )
+    .map_err(|e| RunError::Device(format!("arm at {cmd_addr}: {e}")))?;
     let reader = connect_reports(
         report_host,
         port_of(ReportKind::Real),
@@ -313,7 +319,7 @@ pub fn run(req: RunRequest) -> Result<RunReport, RunError> {
     };
     let (planner, stop) = StopPlanner::start(stop_limits, table.dt, 10.0)
         .map_err(|e| RunError::Device(format!("stop planner thread: {e}")))?;
-    let interlocks = Interlocks::new(Thresholds::from_lab(&req.lab));
+    let interlocks = Interlocks::new(thresholds);
     let io = LoopIo {
         reports,
         telemetry: RunTelemetry {
