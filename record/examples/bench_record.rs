@@ -1,5 +1,5 @@
 //! Run `hitl_record::bench::bench_record` and print its figures (one JSON object).
-//! usage: bench_record [SECONDS] [--keep FILE.mcap] [--max|--paced] [--compression none|lz4|zstdN]
+//! usage: bench_record [SECONDS] [--keep FILE.mcap] [--max|--paced] [--compression none|lz4|zstd:N]
 //!        [--threads N]
 
 fn main() {
@@ -7,14 +7,14 @@ fn main() {
     let secs = args.get(1).and_then(|s| s.parse::<f64>().ok()).unwrap_or(5.0);
     let mut cfg = hitl_record::RecorderConfig::default();
     if let Some(i) = args.iter().position(|a| a == "--compression") {
-        cfg.compression = match args.get(i + 1).map(String::as_str) {
-            Some("none") => hitl_record::ChunkCompression::None,
-            Some("lz4") => hitl_record::ChunkCompression::Lz4,
-            Some(z) if z.starts_with("zstd") => {
-                hitl_record::ChunkCompression::Zstd(z[4..].parse().unwrap_or(1))
+        cfg.compression = match args.get(i + 1).map(|s| s.parse()) {
+            Some(Ok(c)) => c,
+            Some(Err(e)) => {
+                eprintln!("{e}");
+                std::process::exit(2);
             }
-            _ => {
-                eprintln!("--compression none|lz4|zstdN");
+            None => {
+                eprintln!("--compression needs none, lz4, zstd or zstd:LEVEL");
                 std::process::exit(2);
             }
         };
@@ -43,6 +43,7 @@ fn main() {
         let opts = hitl_record::bench::BenchOptions {
             seconds: secs,
             keep: Some(path.into()),
+            config: cfg,
             ..Default::default()
         };
         match hitl_record::bench::run_bench(&opts) {
@@ -54,5 +55,5 @@ fn main() {
         }
         return;
     }
-    println!("{}", hitl_record::bench::bench_record(secs));
+    println!("{}", hitl_record::bench::bench_record(secs, cfg.compression));
 }

@@ -4,6 +4,7 @@
 //! scripts/bench_record_numpy.py, which times the paper's way on identical depth frames):
 //! 1280x800 16UC1 depth (a round target in front of a wall, noise, holes) and 1280x720 rgb8.
 
+use crate::compression::ChunkCompression;
 use crate::msg::{ArmStateMsg, DepthImage, FrameRecord, Phase, Plane, SetpointMsg, TimingMsg};
 use crate::recorder::{Recorder, RecorderConfig};
 use crate::RunMetadata;
@@ -222,10 +223,12 @@ pub fn run_bench(opts: &BenchOptions) -> Result<serde_json::Value, crate::Record
 }
 
 /// `hitl bench record`: a paced run at the camera rate (30 fps, 250 Hz telemetry) and a
-/// max-rate run, `seconds` each. Errors are reported inside the JSON.
-pub fn bench_record(seconds: f64) -> serde_json::Value {
-    let paced = BenchOptions { seconds, ..Default::default() };
-    let max = BenchOptions { seconds, max_rate: true, ..Default::default() };
+/// max-rate run, `seconds` each, chunks compressed with `compression`. Errors are reported
+/// inside the JSON.
+pub fn bench_record(seconds: f64, compression: ChunkCompression) -> serde_json::Value {
+    let config = RecorderConfig { compression, ..RecorderConfig::default() };
+    let paced = BenchOptions { seconds, config, ..Default::default() };
+    let max = BenchOptions { seconds, max_rate: true, config, ..Default::default() };
     let run = |o: &BenchOptions| {
         run_bench(o).unwrap_or_else(|e| serde_json::json!({"error": e.to_string()}))
     };
@@ -234,7 +237,7 @@ pub fn bench_record(seconds: f64) -> serde_json::Value {
     serde_json::json!({
         "benchmark": "record",
         "frames": format!("depth {DEPTH_W}x{DEPTH_H} 16UC1 + color {COLOR_W}x{COLOR_H} rgb8"),
-        "compression": format!("{:?}", RecorderConfig::default().compression),
+        "compression": compression.to_string(),
         "cores": std::thread::available_parallelism().map(|n| n.get()).unwrap_or(1),
         "paced": p,
         "max_rate": m,

@@ -9,6 +9,7 @@
 //! no longer be written so the interlock can trip.
 
 pub mod bench;
+pub mod compression;
 pub mod error;
 pub mod health;
 pub mod metadata;
@@ -20,6 +21,7 @@ pub mod report;
 mod sink;
 pub mod topics;
 
+pub use compression::{ChunkCompression, CompressionParseError};
 pub use error::{ReadError, RecordError};
 pub use health::RecorderHealth;
 pub use metadata::{RunMetadata, SunPhaseTrack};
@@ -29,4 +31,4 @@ pub use msg::{
 };
 pub use queues::{QueueCapacity, Telemetry};
 pub use recorder::{RecordSummary, Recorder, RecorderConfig, RecorderHandle};
-pub use sink::{ChunkCompression, DepthOutput};
+pub use sink::DepthOutput;

@@ -5,12 +5,13 @@
 //! and burn CPU, which must not stall the async runtime's other tasks (perception, camera
 //! intake, signals).
 
+use crate::compression::ChunkCompression;
 use crate::error::RecordError;
 use crate::health::RecorderHealth;
 use crate::metadata::RunMetadata;
 use crate::msg::{EventKind, SafetyEventMsg};
 use crate::queues::{QueueCapacity, Telemetry, COUNTED_TOPICS};
-use crate::sink::{ChunkCompression, DepthOutput, McapSink, CHANNELS};
+use crate::sink::{DepthOutput, McapSink, CHANNELS};
 use crate::topics;
 use serde::Serialize;
 use std::collections::BTreeMap;

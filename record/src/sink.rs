@@ -4,6 +4,7 @@
 //! Foxglove's well-known protobuf schemas (from the `foxglove` crate) so Foxglove and the
 //! Python `mcap-protobuf-support` decoder read them as they are.
 
+use crate::compression::ChunkCompression;
 use crate::error::RecordError;
 use crate::metadata::RunMetadata;
 use crate::msg::{
@@ -107,15 +108,6 @@ pub enum DepthOutput {
     Millimetres16,
 }
 
-/// Compression of the chunks.
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
-pub enum ChunkCompression {
-    None,
-    /// zstd at the given level (1 is fast).
-    Zstd(u32),
-    Lz4,
-}
-
 pub(crate) struct McapSink {
     w: mcap::Writer<BufWriter<File>>,
     ids: [u16; CHANNELS.len()],
@@ -178,11 +170,7 @@ impl McapSink {
     ) -> Result<Self, RecordError> {
         let file = File::create(path)
             .map_err(|e| RecordError::Io { path: path.display().to_string(), source: e })?;
-        let (comp, level) = match compression {
-            ChunkCompression::None => (None, 0),
-            ChunkCompression::Zstd(l) => (Some(mcap::Compression::Zstd), l),
-            ChunkCompression::Lz4 => (Some(mcap::Compression::Lz4), 0),
-        };
+        let (comp, level) = compression.mcap();
         let opts = mcap::WriteOptions::new()
             .compression(comp)
             .compression_level(level)

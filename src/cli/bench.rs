@@ -4,6 +4,7 @@
 use crate::bench::loop_timing::{self, LoopBenchOptions};
 use crate::exit;
 use crate::rt::RtOptions;
+use hitl_record::{ChunkCompression, RecorderConfig};
 use std::time::Duration;
 
 /// Which benchmark.
@@ -56,6 +57,9 @@ pub struct BenchArgs {
     /// Frames per model for the tracker and accuracy benchmarks.
     #[arg(long, default_value_t = 30, value_name = "N")]
     pub frames: usize,
+    /// Chunk compression for the record benchmark: none, lz4, zstd or zstd:LEVEL (1-19).
+    #[arg(long, default_value_t = RecorderConfig::default().compression, value_name = "NAME")]
+    pub compression: ChunkCompression,
     /// Print one JSON object instead of a table.
     #[arg(long)]
     pub json: bool,
@@ -127,7 +131,7 @@ pub fn run(args: BenchArgs) -> u8 {
             return exit::BAD_INPUT;
         }
         Which::Record => {
-            let rust = hitl_record::bench::bench_record(args.seconds);
+            let rust = hitl_record::bench::bench_record(args.seconds, args.compression);
             let secs = args.seconds.to_string();
             let numpy =
                 python_figures(&python, "bench_record_numpy.py", &["--seconds".into(), secs]);
