@@ -219,7 +219,9 @@ fn stalled_replies_fail_the_setpoint_after_the_allowed_backlog_and_then_recover(
     arm.enable_servo().expect("enables");
     stream(&mut arm, &Q0, &Q0, 5).expect("answered while the box hears");
 
-    stub.inject(FaultKind::StallReplies(Some(0.5)));
+    // One second: far longer than sending eleven setpoints takes, even on a VM that loses its
+    // vCPUs for a while, so the stall cannot end before the backlog fills.
+    stub.inject(FaultKind::StallReplies(Some(1.0)));
     std::thread::sleep(Duration::from_millis(20));
     let mut sent = 0;
     let err = loop {
@@ -234,7 +236,7 @@ fn stalled_replies_fail_the_setpoint_after_the_allowed_backlog_and_then_recover(
     assert_eq!(err.kind(), ErrorKind::Timeout);
 
     // The stall ends: the late replies arrive and the stream goes on.
-    std::thread::sleep(Duration::from_millis(600));
+    std::thread::sleep(Duration::from_millis(1100));
     arm.flush_servo_replies().expect("the late replies arrive");
     stream(&mut arm, &Q0, &Q0, 5).expect("answered again");
     stub.shutdown();

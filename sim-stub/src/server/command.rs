@@ -57,9 +57,20 @@ fn connection(shared: Arc<Shared>, mut stream: TcpStream) {
             break;
         }
         if shared.replies_stalled() {
-            // A box that hears nothing: requests wait in the socket, unanswered.
+            // A box that hears nothing: requests wait in the socket, or in `rx` if a read
+            // was under way when the stall began, unanswered.
             std::thread::sleep(POLL / 4);
             continue;
+        }
+        // Answer only here, after the stall check: bytes that a read blocked since before the
+        // stall brings in are held until the stall ends, never answered during it.
+        match answer_all(&shared, &mut rx, &mut stream, &mut out) {
+            Ok(()) => {}
+            Err(ConnError::Codec) => {
+                shared.counters.bad_frames.fetch_add(1, Ordering::Relaxed);
+                break;
+            }
+            Err(ConnError::Io) => break,
         }
         match rx.fill_from(&mut stream) {
             Ok(0) => break,
@@ -72,14 +83,6 @@ fn connection(shared: Arc<Shared>, mut stream: TcpStream) {
                 break;
             }
             Err(_) => break,
-        }
-        match answer_all(&shared, &mut rx, &mut stream, &mut out) {
-            Ok(()) => {}
-            Err(ConnError::Codec) => {
-                shared.counters.bad_frames.fetch_add(1, Ordering::Relaxed);
-                break;
-            }
-            Err(ConnError::Io) => break,
         }
     }
     let _ = stream.shutdown(std::net::Shutdown::Both);
@@ -104,14 +107,14 @@ impl From<io::Error> for ConnError {
     }
 }
 
-/// Answer every complete request in the buffer.
+/// Answer every complete request in the buffer, up to a stall that begins meanwhile.
 fn answer_all(
     shared: &Shared,
     rx: &mut FrameAccumulator<RX_CAP>,
     stream: &mut TcpStream,
     out: &mut [u8],
 ) -> Result<(), ConnError> {
-    while rx.poll_frame(any_frame_len)?.is_some() {
+    while !shared.replies_stalled() && rx.poll_frame(any_frame_len)?.is_some() {
         let req = decode_request(rx.frame())?;
         let n = match req.protocol {
             // The SDK's keep-alive frames need no answer.
