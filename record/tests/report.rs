@@ -43,7 +43,13 @@ fn report_of_a_synthetic_run() {
         });
         if k.is_multiple_of(25) {
             let fk = k / 25;
-            tel.push_frame(frame(fk, t, true));
+            // A camera delivers frames at its rate; this loop has no clock, so it waits for the
+            // writer instead of overrunning the 16-frame queue (drops are tested elsewhere).
+            let give_up = std::time::Instant::now() + std::time::Duration::from_secs(10);
+            while !tel.frame_queue_has_room() && std::time::Instant::now() < give_up {
+                std::thread::sleep(std::time::Duration::from_millis(1));
+            }
+            assert!(tel.push_frame(frame(fk, t, true)), "frame {fk} not queued");
             let mut est = frame(fk, t, true).gt_pose.unwrap_or(Pose::IDENTITY);
             est.translation[0] += 0.003; // 3 mm off
             tel.push_pose_estimate(&PoseStamped { capture_ns: t, pose: est });
