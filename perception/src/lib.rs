@@ -20,6 +20,7 @@ pub mod onnx;
 pub mod pnp;
 pub mod pose;
 pub mod replay;
+pub mod reregister;
 pub mod socket;
 pub mod testing;
 pub mod worker;
@@ -29,4 +30,5 @@ pub use estimator::{backend_from_spec, BackendSpec, Estimate, EstimateKind, Pose
 pub use frame::PerceptionFrame;
 pub use metrics::{evaluate, FrameError, Metrics, PosePair};
 pub use models::{Mesh, SymmetryClass, TargetModel};
-pub use worker::{spawn_worker, PoseResult, ReregisterPolicy, WorkerHandle, WorkerStats};
+pub use reregister::{PolicyError, ReregisterPolicy, Reregistering};
+pub use worker::{spawn_worker, PoseResult, WorkerHandle, WorkerStats};

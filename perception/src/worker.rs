@@ -6,26 +6,17 @@
 //! pool, so the async threads never stall on a pose solve; each result goes out on a bounded
 //! channel stamped with the frame's timestamp (the lead writes it to `/pose/estimate`).
 //!
-//! Re-registration policy: the backend registers globally on the first frame and whenever it
-//! loses track (its own failure detection); the worker additionally resets it after a `Lost`
-//! frame, every `every_n_frames` frames and when the fit residual passes `max_residual_m`.
+//! Re-registration follows a [`ReregisterPolicy`] through [`Reregistering`], the same driver
+//! `hitl eval --backend` replays with.
 
 use crate::estimator::{Estimate, PoseEstimator};
+use crate::reregister::{ReregisterPolicy, Reregistering};
 use crate::PerceptionFrame;
 use crossbeam_queue::ArrayQueue;
 use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
 use std::sync::Arc;
 use tokio::sync::{mpsc, Notify};
 use tokio::task::JoinHandle;
-
-/// When the worker forces a fresh global registration.
-#[derive(Debug, Clone, Copy, PartialEq, Default)]
-pub struct ReregisterPolicy {
-    /// Reset the tracker every N frames handed to it (None: never).
-    pub every_n_frames: Option<u64>,
-    /// Reset the tracker when an estimate's fit residual exceeds this (drift signal).
-    pub max_residual_m: Option<f64>,
-}
 
 /// Counters of the worker, readable at any time.
 #[derive(Debug, Default)]
@@ -135,18 +126,16 @@ pub fn spawn_worker(
     let queue = Arc::new(FrameQueue::new(queue_capacity, stats.clone()));
     let (tx, rx) = mpsc::channel(results_capacity.max(1));
     let handle = WorkerHandle { queue: queue.clone(), stats: stats.clone() };
-    let task = tokio::spawn(run(estimator, queue, stats, tx, policy));
+    let task = tokio::spawn(run(Reregistering::new(estimator, policy), queue, stats, tx));
     (handle, rx, task)
 }
 
 async fn run(
-    mut estimator: Box<dyn PoseEstimator>,
+    mut driven: Reregistering,
     queue: Arc<FrameQueue>,
     stats: Arc<WorkerStats>,
     tx: mpsc::Sender<PoseResult>,
-    policy: ReregisterPolicy,
 ) {
-    let mut handed: u64 = 0;
     loop {
         let frame = match queue.ring.pop() {
             Some(f) => f,
@@ -159,21 +148,14 @@ async fn run(
                 continue;
             }
         };
-        if let Some(n) = policy.every_n_frames.filter(|&n| n > 0) {
-            if handed > 0 && handed.is_multiple_of(n) {
-                estimator.reset();
-                stats.resets.fetch_add(1, Ordering::Relaxed);
-            }
-        }
-        handed += 1;
         let (ts, seq) = (frame.timestamp_ns, frame.seq);
         let joined = tokio::task::spawn_blocking(move || {
             let t0 = std::time::Instant::now();
-            let r = estimator.estimate(&frame);
-            (estimator, r, t0.elapsed().as_nanos() as u64)
+            let (r, resets) = driven.estimate(&frame);
+            (driven, r, resets, t0.elapsed().as_nanos() as u64)
         })
         .await;
-        let (est, result, solve_ns) = match joined {
+        let (back, result, resets, solve_ns) = match joined {
             Ok(v) => v,
             Err(e) => {
                 // The backend panicked: nothing left to run; report and stop.
@@ -189,19 +171,13 @@ async fn run(
                 return;
             }
         };
-        estimator = est;
+        driven = back;
+        stats.resets.fetch_add(u64::from(resets), Ordering::Relaxed);
         let estimate = match result {
             Ok(e) => {
                 stats.estimated.fetch_add(1, Ordering::Relaxed);
-                let drift = policy
-                    .max_residual_m
-                    .is_some_and(|m| e.residual_m.is_finite() && e.residual_m > m);
                 if e.pose.is_none() {
                     stats.lost.fetch_add(1, Ordering::Relaxed);
-                }
-                if e.pose.is_none() || drift {
-                    estimator.reset();
-                    stats.resets.fetch_add(1, Ordering::Relaxed);
                 }
                 Ok(e)
             }
