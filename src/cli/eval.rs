@@ -5,12 +5,14 @@
 //! timestamp, or, with `--backend`, a backend re-run offline over the recorded frames. `scale`
 //! (lab metres per real metre) comes from the `run` metadata record unless `--scale` is given.
 
+use crate::cli::reregister::ReregisterArgs;
 use crate::exit;
 use hitl_perception::estimator::BackendSpec;
 use hitl_perception::metrics::{evaluate, frame_error, PosePair};
 use hitl_perception::pose::Pose;
 use hitl_perception::replay::replay_frames;
-use hitl_perception::{backend_from_spec, TargetModel};
+use hitl_perception::reregister::METADATA_KEY;
+use hitl_perception::{backend_from_spec, ReregisterPolicy, Reregistering, TargetModel};
 use std::collections::HashMap;
 use std::path::PathBuf;
 
@@ -33,6 +35,10 @@ pub struct EvalArgs {
     /// Lab metres per real metre (default: the run's `scale` metadata).
     #[arg(long)]
     pub scale: Option<f64>,
+    /// With --backend: when to re-register (default: what the recorded run used, from its
+    /// metadata; else on the first frame and after a lost one only).
+    #[command(flatten)]
+    pub reregister: ReregisterArgs,
     /// Also list every frame's errors (e_t, e_r, or "failed"), to see where a track went wrong;
     /// with --json they go in a `per_frame` array.
     #[arg(long)]
@@ -119,23 +125,35 @@ fn eval(args: &EvalArgs) -> Result<serde_json::Value, String> {
                 .unwrap_or_else(|| "asymmetric".to_string());
             let model = TargetModel::from_spec(&target).map_err(|e| e.to_string())?;
             let mesh = model.lab_mesh(scale).map_err(|e| e.to_string())?;
-            let mut est = backend_from_spec(&spec, &mesh)
+            let policy = if args.reregister.given() {
+                args.reregister.policy().map_err(|e| e.to_string())?
+            } else {
+                recorded_policy(run_meta, path)?
+            };
+            let est = backend_from_spec(&spec, &mesh)
                 .map_err(|e| e.to_string())?
                 .ok_or("--backend none has nothing to run")?;
+            let mut est = Reregistering::new(est, policy);
             let mut out = HashMap::new();
-            let mut errors = 0usize;
+            let (mut errors, mut resets) = (0usize, 0u64);
             let t0 = std::time::Instant::now();
-            let summary = replay_frames(path, |f| match est.estimate(&f) {
-                Ok(e) => {
-                    if let Some(p) = e.pose {
-                        out.insert(f.timestamp_ns, p);
+            let summary = replay_frames(path, |f| {
+                let (r, n) = est.estimate(&f);
+                resets += u64::from(n);
+                match r {
+                    Ok(e) => {
+                        if let Some(p) = e.pose {
+                            out.insert(f.timestamp_ns, p);
+                        }
                     }
+                    Err(_) => errors += 1,
                 }
-                Err(_) => errors += 1,
             })
             .map_err(|e| e.to_string())?;
             let secs = t0.elapsed().as_secs_f64();
             extra.insert("backend".into(), serde_json::json!(est.name()));
+            extra.insert("reregister".into(), serde_json::json!(policy));
+            extra.insert("backend_resets".into(), serde_json::json!(resets));
             extra.insert("target".into(), serde_json::json!(target));
             extra.insert("replayed_frames".into(), serde_json::json!(summary.frames));
             extra.insert("backend_errors".into(), serde_json::json!(errors));
@@ -168,6 +186,22 @@ fn eval(args: &EvalArgs) -> Result<serde_json::Value, String> {
         );
     }
     Ok(v)
+}
+
+/// The re-registration policy the recorded run used (none recorded: the default).
+fn recorded_policy(
+    run_meta: Option<&std::collections::BTreeMap<String, String>>,
+    path: &std::path::Path,
+) -> Result<ReregisterPolicy, String> {
+    match run_meta.and_then(|m| m.get(METADATA_KEY)) {
+        None => Ok(ReregisterPolicy::default()),
+        Some(json) => {
+            let p: ReregisterPolicy = serde_json::from_str(json)
+                .map_err(|e| format!("{}: run metadata `{METADATA_KEY}`: {e}", path.display()))?;
+            ReregisterPolicy::new(p.every_n_frames, p.max_residual_m)
+                .map_err(|e| format!("{}: run metadata `{METADATA_KEY}`: {e}", path.display()))
+        }
+    }
 }
 
 /// One row per ground-truth frame, in capture order: its time from the first frame and its

@@ -5,6 +5,7 @@ pub mod check;
 pub mod eval;
 pub mod plan;
 pub mod report;
+pub mod reregister;
 pub mod run;
 #[cfg(feature = "stub")]
 pub mod stub;

@@ -4,6 +4,7 @@
 //! xArm moves: the operator must confirm the enclosure is clear (or pass `--yes`), and the run
 //! refuses when it cannot ask.
 
+use crate::cli::reregister::ReregisterArgs;
 use crate::control::session::{self, ArmTarget, RunRequest};
 use crate::exit;
 use crate::rt::RtOptions;
@@ -41,6 +42,8 @@ pub struct RunArgs {
     /// listening on a unix socket, docs/perception.md), or none.
     #[arg(long, default_value = "none", value_name = "icp|onnx:MODEL|socket:PATH|none")]
     pub perception: String,
+    #[command(flatten)]
+    pub reregister: ReregisterArgs,
     /// Simulated camera intrinsics: nfov, wfov (the paper's presets) or orbbec.
     #[arg(long, default_value = "orbbec", value_name = "nfov|wfov|orbbec")]
     pub camera_preset: String,
@@ -103,6 +106,13 @@ fn default_record_path() -> PathBuf {
 }
 
 pub fn run(args: RunArgs, record: bool) -> u8 {
+    let reregister = match args.reregister.policy() {
+        Ok(policy) => policy,
+        Err(e) => {
+            crate::errln!("hitl run: {e}");
+            return exit::BAD_INPUT;
+        }
+    };
     let lab = match &args.config {
         Some(path) => match LabConfig::load(path) {
             Ok(lab) => lab,
@@ -156,6 +166,7 @@ pub fn run(args: RunArgs, record: bool) -> u8 {
         camera: args.camera,
         light: args.light,
         perception: args.perception,
+        reregister,
         camera_preset: args.camera_preset,
         camera_size: args.camera_size,
         target_model: args.target_model,

@@ -162,6 +162,7 @@ pub(super) fn start_recorder(
             "camera": req.camera,
             "light": req.light,
             "perception": req.perception,
+            "reregister": req.reregister,
             "target_model": req.target_model,
             "arm": match &req.target { ArmTarget::Stub { faults } => format!("stub (faults: {faults:?})"), ArmTarget::Remote { host } => host.clone() },
         })
@@ -171,7 +172,14 @@ pub(super) fn start_recorder(
         lab_config: req.lab.to_toml(),
         versions,
         scale: Some(scale),
-        extra: [("target_model".to_string(), req.target_model.clone())].into(),
+        extra: [
+            ("target_model".to_string(), req.target_model.clone()),
+            (
+                hitl_perception::reregister::METADATA_KEY.to_string(),
+                serde_json::json!(req.reregister).to_string(),
+            ),
+        ]
+        .into(),
         sun_phase: traj.sun_phase_deg.as_ref().map(|deg| SunPhaseTrack {
             t_s: traj.t.iter().map(|t| t / req.speed_scale).collect(),
             sun_phase_deg: deg.clone(),

@@ -62,6 +62,8 @@ pub struct RunRequest {
     pub camera: String,
     pub light: String,
     pub perception: String,
+    /// When the perception backend re-registers beyond its first frame and a lost track.
+    pub reregister: ReregisterPolicy,
     /// Simulated camera intrinsics preset (nfov, wfov, orbbec) and size.
     pub camera_preset: String,
     pub camera_size: Option<(u32, u32)>,
@@ -232,8 +234,7 @@ pub fn run(req: RunRequest) -> Result<RunReport, RunError> {
                 None => (None, None),
                 Some(est) => {
                     let _guard = runtime.enter();
-                    let (handle, mut results, _task) =
-                        spawn_worker(est, 4, 64, ReregisterPolicy::default());
+                    let (handle, mut results, _task) = spawn_worker(est, 4, 64, req.reregister);
                     let sink = record_telemetry.clone();
                     let forward = runtime.spawn(async move {
                         let mut n = 0u64;
