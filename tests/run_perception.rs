@@ -106,10 +106,13 @@ fn a_live_icp_run_meets_the_goal_and_an_offline_rerun_repeats_it_under_the_recor
     let lost = never["failures"].as_u64().unwrap_or(u64::MAX);
     assert_eq!(never["backend_resets"].as_u64(), Some(lost), "only lost frames reset: {never}");
 
-    // Bad policies: exit 2 with the value named.
+    // Bad policies: exit 2 with the value named; a policy with no re-run to apply to, too.
     let bad = hitl(&["eval", m, "--backend", "icp", "--reregister-every", "0"]);
     assert_eq!(bad.status.code(), Some(2));
     assert!(String::from_utf8_lossy(&bad.stderr).contains("at least 1"), "{bad:?}");
+    let idle = hitl(&["eval", m, "--reregister-every", "3"]);
+    assert_eq!(idle.status.code(), Some(2));
+    assert!(String::from_utf8_lossy(&idle.stderr).contains("--backend"), "{idle:?}");
 }
 
 #[test]
@@ -136,4 +139,10 @@ fn a_bad_reregistration_policy_is_refused_before_anything_moves() {
     assert_eq!(run.status.code(), Some(2), "{err}");
     assert!(err.contains("-0.5") && err.contains("residual"), "{err}");
     assert!(!mcap.exists(), "nothing was recorded, so nothing ran");
+
+    // A policy with no estimator to drive.
+    let idle = hitl(&["run", traj.to_str().expect("utf-8"), "--reregister-every", "5"]);
+    let err = String::from_utf8_lossy(&idle.stderr);
+    assert_eq!(idle.status.code(), Some(2), "{err}");
+    assert!(err.contains("--perception"), "{err}");
 }

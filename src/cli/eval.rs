@@ -96,6 +96,11 @@ pub fn run(args: EvalArgs) -> u8 {
 
 fn eval(args: &EvalArgs) -> Result<serde_json::Value, String> {
     let path = &args.recording;
+    if args.reregister.given() && args.backend.is_none() {
+        return Err("--reregister-every and --reregister-residual-m apply to a --backend re-run; \
+                    the recorded estimates are scored as they are"
+            .into());
+    }
     let rec = hitl_record::reader::read_recording(path).map_err(|e| e.to_string())?;
     let run_meta = rec.metadata.get("run");
     let scale = match args.scale {
@@ -196,10 +201,11 @@ fn recorded_policy(
     match run_meta.and_then(|m| m.get(METADATA_KEY)) {
         None => Ok(ReregisterPolicy::default()),
         Some(json) => {
-            let p: ReregisterPolicy = serde_json::from_str(json)
-                .map_err(|e| format!("{}: run metadata `{METADATA_KEY}`: {e}", path.display()))?;
-            ReregisterPolicy::new(p.every_n_frames, p.max_residual_m)
-                .map_err(|e| format!("{}: run metadata `{METADATA_KEY}`: {e}", path.display()))
+            let bad = |e: &dyn std::fmt::Display| {
+                format!("{}: run metadata `{METADATA_KEY}`: {e}", path.display())
+            };
+            let p: ReregisterPolicy = serde_json::from_str(json).map_err(|e| bad(&e))?;
+            ReregisterPolicy::new(p.every_n_frames, p.max_residual_m).map_err(|e| bad(&e))
         }
     }
 }
