@@ -9,7 +9,7 @@ use nalgebra::{Isometry3, Translation3, UnitQuaternion, Vector3};
 use std::path::Path;
 
 mod common;
-use common::hitl;
+use common::{hitl, num};
 
 fn pose(iso: &Isometry3<f64>) -> Pose {
     let m = iso.to_homogeneous();
@@ -62,10 +62,6 @@ fn write_recording(path: &Path, scale: Option<f64>) {
         tel.push_pose_estimate(&PoseStamped { capture_ns: t, pose: pose(&est) });
     }
     handle.finish().expect("recording closes");
-}
-
-fn num(v: &serde_json::Value, key: &str) -> f64 {
-    v[key].as_f64().unwrap_or_else(|| panic!("{key} missing in {v}"))
 }
 
 #[test]

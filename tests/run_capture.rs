@@ -10,7 +10,7 @@ use std::collections::BTreeMap;
 use std::ops::ControlFlow;
 
 mod common;
-use common::{hitl, SHARED_VM_LAB};
+use common::{hitl, plan_flyaround, SIM_CAPTURE_RUN};
 
 #[test]
 fn one_image_set_and_one_ground_truth_per_capture_and_the_truth_lands_on_the_mask() {
@@ -18,38 +18,8 @@ fn one_image_set_and_one_ground_truth_per_capture_and_the_truth_lands_on_the_mas
     let traj = dir.path().join("fly.npz");
     let mcap = dir.path().join("run.mcap");
     let (t, m) = (traj.to_str().expect("utf-8"), mcap.to_str().expect("utf-8"));
-    let plan = hitl(&[
-        "plan",
-        "--preset",
-        "flyaround",
-        "--range-m",
-        "10",
-        "--duration-s",
-        "20",
-        "--capture-every",
-        "25",
-        "--out",
-        t,
-    ]);
-    assert_eq!(plan.status.code(), Some(0), "{}", String::from_utf8_lossy(&plan.stderr));
-    let run = hitl(&[
-        "run",
-        t,
-        "--record",
-        m,
-        "--camera",
-        "sim",
-        "--camera-preset",
-        "wfov",
-        "--camera-size",
-        "320x256",
-        "--light",
-        "sim",
-        "--plain",
-        // This test is about captures; the interlocks a shared VM can trip have their own.
-        "--config",
-        SHARED_VM_LAB,
-    ]);
+    plan_flyaround(&traj, "10", "25");
+    let run = hitl(&[&["run", t, "--record", m][..], &SIM_CAPTURE_RUN].concat());
     let out =
         format!("{}{}", String::from_utf8_lossy(&run.stdout), String::from_utf8_lossy(&run.stderr));
     assert_eq!(run.status.code(), Some(0), "{out}");

@@ -8,17 +8,13 @@ use hitl_record::reader::read_recording;
 use hitl_trajectories::npz;
 
 mod common;
-use common::{hitl, SHARED_VM_LAB};
+use common::{hitl, num, plan_flyaround, SIM_CAPTURE_RUN};
 
 fn json(out: &std::process::Output) -> serde_json::Value {
     let text = String::from_utf8_lossy(&out.stdout);
     serde_json::from_str(&text).unwrap_or_else(|e| {
         panic!("not one JSON object ({e}): {text}{}", String::from_utf8_lossy(&out.stderr))
     })
-}
-
-fn num(v: &serde_json::Value, key: &str) -> f64 {
-    v[key].as_f64().unwrap_or_else(|| panic!("no number `{key}` in {v}"))
 }
 
 #[test]
@@ -28,44 +24,12 @@ fn a_live_icp_run_meets_the_goal_and_an_offline_rerun_repeats_it_under_the_recor
     let mcap = dir.path().join("run.mcap");
     let (t, m) = (traj.to_str().expect("utf-8"), mcap.to_str().expect("utf-8"));
     let range_m = 10.0;
-    let plan = hitl(&[
-        "plan",
-        "--preset",
-        "flyaround",
-        "--range-m",
-        "10",
-        "--duration-s",
-        "20",
-        "--capture-every",
-        "20",
-        "--out",
-        t,
-    ]);
-    assert_eq!(plan.status.code(), Some(0), "{}", String::from_utf8_lossy(&plan.stderr));
+    plan_flyaround(&traj, "10", "20");
     let captures = npz::load(&traj).expect("plan").trajectory.capture_count() as u64;
     assert!(captures >= 8, "{captures} captures");
 
-    let run = hitl(&[
-        "run",
-        t,
-        "--record",
-        m,
-        "--camera",
-        "sim",
-        "--camera-preset",
-        "wfov",
-        "--camera-size",
-        "320x256",
-        "--light",
-        "sim",
-        "--perception",
-        "icp",
-        "--reregister-every",
-        "4",
-        "--plain",
-        "--config",
-        SHARED_VM_LAB,
-    ]);
+    let policy = ["--perception", "icp", "--reregister-every", "4"];
+    let run = hitl(&[&["run", t, "--record", m][..], &policy, &SIM_CAPTURE_RUN].concat());
     let out =
         format!("{}{}", String::from_utf8_lossy(&run.stdout), String::from_utf8_lossy(&run.stderr));
     assert_eq!(run.status.code(), Some(0), "{out}");

@@ -1,6 +1,7 @@
 //! Helpers shared by the end-to-end tests: running the `hitl` binary, and the lab they play in.
 #![allow(dead_code)] // each test binary uses its own subset
 
+use std::path::Path;
 use std::process::{Command, Output, Stdio};
 
 /// Runs `hitl ARGS...` with no stdin and returns what it printed and its exit status.
@@ -20,3 +21,45 @@ pub const SHARED_VM_LAB: &str =
 /// The default lab with 400 ms silence limits, for the tests that silence the arm: what they
 /// inject, not the host's scheduling, trips (the file says why).
 pub const SILENCE_LAB: &str = concat!(env!("CARGO_MANIFEST_DIR"), "/tests/data/silence-lab.toml");
+
+/// `hitl run` flags of the capture tests: the simulated WFOV camera at 320x256, the simulated
+/// light, plain progress and the shared-VM lab (these tests are about captures and estimates;
+/// the interlocks a shared VM can trip have tests of their own).
+pub const SIM_CAPTURE_RUN: [&str; 11] = [
+    "--camera",
+    "sim",
+    "--camera-preset",
+    "wfov",
+    "--camera-size",
+    "320x256",
+    "--light",
+    "sim",
+    "--plain",
+    "--config",
+    SHARED_VM_LAB,
+];
+
+/// Plans a 20 s fly-around at `range_m` with a capture every `capture_every` waypoints into
+/// `out`, and checks `hitl plan` succeeded.
+pub fn plan_flyaround(out: &Path, range_m: &str, capture_every: &str) {
+    let out = out.to_str().expect("utf-8 path");
+    let plan = hitl(&[
+        "plan",
+        "--preset",
+        "flyaround",
+        "--range-m",
+        range_m,
+        "--duration-s",
+        "20",
+        "--capture-every",
+        capture_every,
+        "--out",
+        out,
+    ]);
+    assert_eq!(plan.status.code(), Some(0), "{}", String::from_utf8_lossy(&plan.stderr));
+}
+
+/// A number from a JSON object, or a panic naming the key.
+pub fn num(v: &serde_json::Value, key: &str) -> f64 {
+    v[key].as_f64().unwrap_or_else(|| panic!("no number `{key}` in {v}"))
+}
