@@ -19,10 +19,17 @@ fn one_image_set_and_one_ground_truth_per_capture_and_the_truth_lands_on_the_mas
     let mcap = dir.path().join("run.mcap");
     let (t, m) = (traj.to_str().expect("utf-8"), mcap.to_str().expect("utf-8"));
     plan_flyaround(&traj, "10", "25");
-    let run = hitl(&[&["run", t, "--record", m][..], &SIM_CAPTURE_RUN].concat());
+    let zstd = ["--record-compression", "zstd"];
+    let run = hitl(&[&["run", t, "--record", m][..], &zstd, &SIM_CAPTURE_RUN].concat());
     let out =
         format!("{}{}", String::from_utf8_lossy(&run.stdout), String::from_utf8_lossy(&run.stderr));
     assert_eq!(run.status.code(), Some(0), "{out}");
+
+    // Every chunk is compressed as asked.
+    let bytes = std::fs::read(&mcap).expect("read the recording");
+    let summary = mcap::Summary::read(&bytes).expect("summary").expect("a summary section");
+    assert!(!summary.chunk_indexes.is_empty());
+    assert!(summary.chunk_indexes.iter().all(|c| c.compression == "zstd"), "not all zstd");
 
     let captures = npz::load(&traj).expect("plan").trajectory.capture_count() as u64;
     assert!(captures >= 5, "{captures} captures");

@@ -42,8 +42,8 @@ impl Default for RecorderConfig {
     fn default() -> Self {
         Self {
             queues: QueueCapacity::default(),
-            // lz4: about 1.6x the frames per CPU second of zstd level 1 on camera-sized frames
-            // (bench record), at a lower ratio; zstd stays selectable.
+            // lz4: about 1.26x the frames per CPU second of zstd level 1 on camera-sized frames,
+            // at a lower ratio (docs/mcap-topics.md has the figures); the others stay selectable.
             compression: ChunkCompression::Lz4,
             compression_threads: 1,
             chunk_size: 4 << 20,

@@ -8,6 +8,7 @@ use crate::cli::reregister::ReregisterArgs;
 use crate::control::session::{self, ArmTarget, RunRequest};
 use crate::exit;
 use crate::rt::RtOptions;
+use hitl_record::{ChunkCompression, RecorderConfig};
 use hitl_trajectories::lab::LabConfig;
 use std::io::{BufRead, IsTerminal, Write};
 use std::path::PathBuf;
@@ -29,6 +30,11 @@ pub struct RunArgs {
     /// Record the run to this MCAP file (`hitl record` picks runs/run-<time>.mcap by default).
     #[arg(long, value_name = "FILE.mcap")]
     pub record: Option<PathBuf>,
+    /// How the recording's chunks are compressed: lz4 (fast), zstd or zstd:LEVEL (1-19,
+    /// smaller files, more CPU), or none (fastest, largest); `hitl bench record --compression`
+    /// measures each.
+    #[arg(long, default_value_t = RecorderConfig::default().compression, value_name = "NAME")]
+    pub record_compression: ChunkCompression,
     /// Lab configuration (TOML). Defaults to the DreamSat-Bench enclosure.
     #[arg(long, value_name = "FILE.toml")]
     pub config: Option<PathBuf>,
@@ -170,6 +176,7 @@ pub fn run(args: RunArgs, record: bool) -> u8 {
         speed_scale: args.speed_scale,
         target,
         record,
+        record_compression: args.record_compression,
         camera: args.camera,
         light: args.light,
         perception: args.perception,

@@ -13,7 +13,9 @@ use crate::devices::none::{NoCamera, NoInputs, NoLight};
 use hitl_drivers::light::{LightSpec, SerialLight};
 use hitl_hal::MonotonicClock;
 use hitl_hal::RgbdCamera as _;
-use hitl_record::{Recorder, RecorderHandle, RunMetadata, SunPhaseTrack, Telemetry};
+use hitl_record::{
+    Recorder, RecorderConfig, RecorderHandle, RunMetadata, SunPhaseTrack, Telemetry,
+};
 use hitl_trajectories::Trajectory;
 use sha2::Digest as _;
 use std::sync::atomic::Ordering;
@@ -162,6 +164,7 @@ pub(super) fn start_recorder(
             "camera": req.camera,
             "light": req.light,
             "perception": req.perception,
+            "record_compression": req.record_compression.to_string(),
             "reregister": req.reregister,
             "target_model": req.target_model,
             "arm": match &req.target { ArmTarget::Stub { faults } => format!("stub (faults: {faults:?})"), ArmTarget::Remote { host } => host.clone() },
@@ -185,7 +188,9 @@ pub(super) fn start_recorder(
             sun_phase_deg: deg.clone(),
         }),
     };
-    Recorder::spawn(path, &meta)
+    let config =
+        RecorderConfig { compression: req.record_compression, ..RecorderConfig::default() };
+    Recorder::spawn_with(path, &meta, config)
         .map(Some)
         .map_err(|e| RunError::BadInput(format!("cannot record to {}: {e}", path.display())))
 }

@@ -32,7 +32,7 @@ use devices::{
 use hitl_drivers::xarm::{ClientConfig, ReportKind, ServoReplies, XarmClient};
 use hitl_hal::{Arm, Joints, MonotonicClock};
 use hitl_perception::{backend_from_spec, spawn_worker, BackendSpec, ReregisterPolicy};
-use hitl_record::{EventKind, PoseStamped, SafetyEventMsg};
+use hitl_record::{ChunkCompression, EventKind, PoseStamped, SafetyEventMsg};
 use hitl_trajectories::lab::LabConfig;
 use operator::install_ctrlc;
 use prepare::{plan_approach, prepare};
@@ -59,6 +59,8 @@ pub struct RunRequest {
     pub speed_scale: f64,
     pub target: ArmTarget,
     pub record: Option<PathBuf>,
+    /// Chunk compression of the recording.
+    pub record_compression: ChunkCompression,
     pub camera: String,
     pub light: String,
     pub perception: String,
