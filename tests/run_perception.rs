@@ -70,6 +70,16 @@ fn a_live_icp_run_meets_the_goal_and_an_offline_rerun_repeats_it_under_the_recor
     let lost = never["failures"].as_u64().unwrap_or(u64::MAX);
     assert_eq!(never["backend_resets"].as_u64(), Some(lost), "only lost frames reset: {never}");
 
+    // The text output says which backend ran under which policy.
+    let text = hitl(&["eval", m, "--backend", "icp"]);
+    let text = String::from_utf8_lossy(&text.stdout);
+    assert!(
+        text.contains(
+            "backend icp, re-registered on the first frame and after a lost one, every 4 frames: "
+        ),
+        "{text}"
+    );
+
     // Bad policies: exit 2 with the value named; a policy with no re-run to apply to, too.
     let bad = hitl(&["eval", m, "--backend", "icp", "--reregister-every", "0"]);
     assert_eq!(bad.status.code(), Some(2));

@@ -70,6 +70,13 @@ pub fn run(args: EvalArgs) -> u8 {
                     }
                 }
                 let g = |k: &str| v.get(k).cloned().unwrap_or(serde_json::Value::Null);
+                let policy = serde_json::from_value::<ReregisterPolicy>(g("reregister"));
+                if let (Some(backend), Ok(policy)) = (g("backend").as_str(), policy) {
+                    crate::outln!(
+                        "backend {backend}, re-registered {policy}: {} resets",
+                        g("backend_resets")
+                    );
+                }
                 crate::outln!(
                     "frames {} (failures {}), scale {}\n\
                      e_t real m: mean {} median {} std {}\n\

@@ -113,13 +113,6 @@ fn default_record_path() -> PathBuf {
 
 pub fn run(args: RunArgs, record: bool) -> u8 {
     let reregister = match args.reregister.policy() {
-        Ok(_) if args.reregister.given() && args.perception == "none" => {
-            crate::errln!(
-                "hitl run: --reregister-every and --reregister-residual-m need a pose estimator \
-                 (--perception icp|onnx:MODEL|socket:PATH)"
-            );
-            return exit::BAD_INPUT;
-        }
         Ok(policy) => policy,
         Err(e) => {
             crate::errln!("hitl run: {e}");

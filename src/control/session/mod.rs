@@ -175,6 +175,13 @@ pub fn run(req: RunRequest) -> Result<RunReport, RunError> {
         req.perception.parse().map_err(|e: hitl_perception::PerceptionError| {
             RunError::BadInput(format!("--perception: {e}"))
         })?;
+    if backend == BackendSpec::None && req.reregister != ReregisterPolicy::default() {
+        return Err(RunError::BadInput(
+            "--reregister-every and --reregister-residual-m need a pose estimator \
+             (--perception icp|onnx:MODEL|socket:PATH)"
+                .into(),
+        ));
+    }
     let clock = MonotonicClock::new();
 
     // The arm: the embedded stub, or the real box.
