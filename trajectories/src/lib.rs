@@ -4,6 +4,7 @@
 //! - [`npz`]: loading and writing it with a real NPY/NPZ library, with typed errors;
 //! - [`timing`]: time parametrisation from waypoints to setpoints at the control rate;
 //! - [`kinematics`]: xArm7 forward kinematics, joint limits and the link-capsule model;
+//! - [`joint_table`]: the xArm7's joint-limit tables and which one an arm's serial number means;
 //! - [`geometry`]: capsules, segment distances, clearances;
 //! - [`lab`]: the lab configuration (enclosure, arm base, keep-outs, camera mount, limits);
 //! - [`preflight`]: the `hitl check` rules;
@@ -13,6 +14,7 @@
 pub mod bench;
 pub mod geometry;
 pub mod ik;
+pub mod joint_table;
 pub mod kinematics;
 pub mod lab;
 pub mod npz;
