@@ -7,10 +7,14 @@
 //! | --- | --- | --- |
 //! | `drop-connection` | - | close every client connection (command and reports); new ones are accepted |
 //! | `stall-reports` | seconds (default: for good) | report ports stop sending, sockets stay open |
+//! | `stall-replies` | seconds (default: for good) | the command port reads and answers nothing, the connection stays open |
 //! | `arm-error` | controller error code (default 10, servo motor error) | the box raises the error and stops |
-//! | `deviation` | radians (default 0.05) | added to every reported joint (reports and get_joint_pos) |
+//! | `deviation` | radians (default 0.15) | added to every reported joint (reports and get_joint_pos) |
 //! | `estop` | - | the e-stop input reads pressed; the box raises error 2 (emergency IO) and stops |
 //! | `door-open` | - | the door input reads open (the box itself does not see the door) |
+//!
+//! Every default trips the interlock it is named after under the default lab: the stalls last
+//! longer than any silence limit, the deviation is almost twice the lab's 0.08 rad limit.
 
 use hitl_hal::{ErrorKind, ErrorType, InputState, Inputs};
 use std::fmt;
@@ -36,8 +40,9 @@ pub enum FaultKind {
 
 /// Default code of an injected arm error: servo motor error.
 pub const DEFAULT_ARM_ERROR: u8 = 10;
-/// Default injected deviation, radians.
-pub const DEFAULT_DEVIATION_RAD: f64 = 0.05;
+/// Default injected deviation, radians: well beyond the default lab's 0.08 rad deviation limit
+/// (`interlocks.max_deviation_rad`), so the fault trips what it is named after.
+pub const DEFAULT_DEVIATION_RAD: f64 = 0.15;
 
 impl FaultKind {
     pub fn name(&self) -> &'static str {
@@ -231,6 +236,16 @@ mod tests {
             let parsed: Fault = f.parse().expect("valid");
             assert_eq!(parsed.to_string().parse::<Fault>(), Ok(parsed));
         }
+    }
+
+    #[test]
+    fn the_default_deviation_exceeds_the_default_lab_limit_with_margin() {
+        let limit = hitl_trajectories::lab::LabConfig::default().interlocks.max_deviation_rad;
+        assert!(DEFAULT_DEVIATION_RAD >= 1.5 * limit, "{DEFAULT_DEVIATION_RAD} vs {limit}");
+        assert_eq!(
+            "deviation@1".parse::<Fault>().map(|f| f.kind),
+            Ok(FaultKind::Deviation(DEFAULT_DEVIATION_RAD))
+        );
     }
 
     #[test]

@@ -38,6 +38,15 @@ pub struct StubArgs {
     /// Allow a non-loopback --bind (the stub then answers anyone on that network).
     #[arg(long)]
     pub allow_remote: bool,
+    /// Arm serial number the stub answers with; it picks the joint-limit table the stub
+    /// enforces, as on a real arm (digits 3-6 in 1305..8499: a current xArm7, else the first
+    /// arms' wider table). Default: a current xArm7.
+    #[arg(long, value_name = "SN", default_value = hitl_sim_stub::server::arm_box::DEFAULT_ARM_SN)]
+    pub serial: String,
+    /// Firmware version the stub answers with, vMAJOR.MINOR.PATCH (error 60, the servo_j TCP
+    /// speed limit, exists from v2.3.0 on).
+    #[arg(long, value_name = "vX.Y.Z", default_value = hitl_sim_stub::server::arm_box::DEFAULT_FIRMWARE)]
+    pub firmware: String,
 }
 
 fn report_ports(real: u16) -> Vec<(ReportKind, u16)> {
@@ -62,15 +71,17 @@ fn start(args: &StubArgs) -> Result<StubHandle, (u8, String)> {
     };
     let plant = MujocoPlant::new(&lab, args.scene.as_deref())
         .map_err(|e| (exit::BAD_INPUT, e.to_string()))?;
-    let config = StubConfig {
+    let mut config = StubConfig {
         bind: args.bind,
         allow_remote: args.allow_remote,
         cmd_port: args.cmd_port,
         report_ports: report_ports(args.report_port),
         faults: args.faults.clone(),
-        joint_limits: plant.joint_limits(),
         ..StubConfig::default()
-    };
+    }
+    .with_serial(&args.serial);
+    config.identity.firmware = args.firmware.clone();
+    config.identity.validate().map_err(|e| (exit::BAD_INPUT, e.to_string()))?;
     Stub::start(config, Box::new(plant)).map_err(|e| (exit::DEVICE, e.to_string()))
 }
 
@@ -82,6 +93,19 @@ pub fn run(args: StubArgs) -> u8 {
             return code;
         }
     };
+    let (sn, table, limits) = stub.with_box(|b| {
+        let sn = b.identity_config().arm_sn.clone();
+        let table = hitl_trajectories::joint_table::JointTable::for_serial(&sn);
+        (sn, table, b.joint_limits())
+    });
+    crate::errln!(
+        "hitl stub: xArm7 {sn}, firmware {}, joint table {table} (J2 {:.6}..{:.6}, J4 {:.6}..{:.6} rad)",
+        args.firmware,
+        limits[1].0,
+        limits[1].1,
+        limits[3].0,
+        limits[3].1
+    );
     crate::errln!("hitl stub: xArm command port on {}", stub.cmd_addr());
     for kind in ReportKind::ALL {
         if let Some(a) = stub.report_addr(kind) {

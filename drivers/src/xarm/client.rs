@@ -5,6 +5,11 @@
 //! arrived (without blocking), checks their state bits, and writes the next setpoint; it never
 //! waits for a round trip inside the tick. The official Python SDK instead waits for each reply;
 //! [`ServoReplies::Wait`] does the same when wanted (benchmarks, comparison).
+//!
+//! [`Arm::stop`] never waits either: it writes set_state(4) from a buffer it owns and returns;
+//! its reply is counted as outstanding and discarded when it arrives (a stop supervisor repeats
+//! it until the reports show state 4). Every reply must carry the protocol id its request was
+//! sent with (this client sends 0x0002 only) and the request's register.
 
 use super::codec::{
     self, decode_reply, encode_request, encode_servo_j, frame_len, Accept, StateBits,
@@ -25,6 +30,11 @@ pub const COMMAND_PORT: u16 = 502;
 const RX_CAP: usize = 4096;
 /// Largest reply data kept from a request (version strings are 40 bytes, joint tables 28).
 const REPLY_DATA_CAP: usize = 128;
+/// How long motion_enable waits for its reply at least (the official SDK raised its own to 5 s:
+/// the box answers only once the motors are powered).
+pub const MOTION_ENABLE_TIMEOUT: Duration = Duration::from_secs(5);
+/// Bytes of a set_state request.
+const SET_STATE_LEN: usize = codec::REQUEST_HEADER_LEN + 1;
 
 /// How `servo_joint` treats the replies to its setpoints.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -85,6 +95,8 @@ pub struct XarmClient {
     rx: FrameAccumulator<RX_CAP>,
     next_transaction: u16,
     servo_buf: [u8; SERVO_J_LEN],
+    stop_buf: [u8; SET_STATE_LEN],
+    /// Replies not waited for (pipelined servo_j and stop requests) not yet received.
     outstanding: u32,
     /// State byte of the most recent reply of any kind.
     last_state: StateBits,
@@ -133,6 +145,7 @@ impl XarmClient {
             rx: FrameAccumulator::new(),
             next_transaction: 1,
             servo_buf: [0; SERVO_J_LEN],
+            stop_buf: [0; SET_STATE_LEN],
             outstanding: 0,
             last_state: StateBits(0),
             servo_fault: None,
@@ -155,7 +168,7 @@ impl XarmClient {
         self.servo_sent
     }
 
-    /// servo_j replies not yet received.
+    /// Replies not waited for (servo_j setpoints, stop requests) not yet received.
     pub fn outstanding(&self) -> u32 {
         self.outstanding
     }
@@ -172,9 +185,13 @@ impl XarmClient {
         t
     }
 
-    /// Account for one reply frame that is not the one being waited for.
+    /// Account for one reply frame that is not the one being waited for: a pipelined servo_j's
+    /// or a stop's (every other request is waited for).
     fn note_other_reply(&mut self, register: u8, state: StateBits) {
         self.last_state = state;
+        if register == reg::SET_STATE {
+            self.outstanding = self.outstanding.saturating_sub(1);
+        }
         if register == reg::MOVE_SERVOJ {
             self.outstanding = self.outstanding.saturating_sub(1);
             if (state.error() || state.not_ready() || state.invalid()) && self.servo_fault.is_none()
@@ -204,6 +221,13 @@ impl XarmClient {
             let r = decode_reply(self.rx.frame())?;
             if r.register == reg::FEEDBACK {
                 continue;
+            }
+            if r.protocol != PROTOCOL_PRIVATE {
+                return Err(codec::CodecError::ProtocolMismatch {
+                    got: r.protocol,
+                    want: PROTOCOL_PRIVATE,
+                }
+                .into());
             }
             if let Some((t, register)) = want {
                 if r.transaction == t {
@@ -250,7 +274,16 @@ impl XarmClient {
     }
 
     fn wait_reply(&mut self, transaction: u16, register: u8) -> Result<ReplyData, XarmError> {
-        let deadline = Instant::now() + self.config.reply_timeout;
+        self.wait_reply_for(transaction, register, self.config.reply_timeout)
+    }
+
+    fn wait_reply_for(
+        &mut self,
+        transaction: u16,
+        register: u8,
+        timeout: Duration,
+    ) -> Result<ReplyData, XarmError> {
+        let deadline = Instant::now() + timeout;
         loop {
             if let Some(r) = self.scan(Some((transaction, register)))? {
                 return Ok(r);
@@ -259,7 +292,7 @@ impl XarmClient {
             if left.is_zero() {
                 return Err(XarmError::NoReply {
                     register: reg::name(register),
-                    timeout_ms: self.config.reply_timeout.as_millis() as u64,
+                    timeout_ms: timeout.as_millis() as u64,
                 });
             }
             self.sock.set_read_timeout(Some(left.max(Duration::from_micros(100))))?;
@@ -274,11 +307,21 @@ impl XarmClient {
 
     /// Send one request and wait for its reply. Not for the hot path.
     pub fn request(&mut self, register: u8, params: &[u8]) -> Result<ReplyData, XarmError> {
+        self.request_for(register, params, self.config.reply_timeout)
+    }
+
+    /// Send one request and wait up to `timeout` for its reply.
+    pub fn request_for(
+        &mut self,
+        register: u8,
+        params: &[u8],
+        timeout: Duration,
+    ) -> Result<ReplyData, XarmError> {
         let mut buf = [0u8; codec::MAX_FRAME_LEN];
         let t = self.take_transaction();
         let n = encode_request(&mut buf, t, PROTOCOL_PRIVATE, register, params)?;
         (&self.sock).write_all(&buf[..n])?;
-        let reply = self.wait_reply(t, register)?;
+        let reply = self.wait_reply_for(t, register, timeout)?;
         if reply.state.invalid() {
             return Err(XarmError::Invalid { register: reg::name(register) });
         }
@@ -305,8 +348,30 @@ impl XarmClient {
         })
     }
 
+    /// Enable (or disable) every motor; waits [`MOTION_ENABLE_TIMEOUT`] (or the configured
+    /// reply timeout, if longer) for the reply. A system reset: the arm is stopped afterwards.
     pub fn motion_enable(&mut self, enable: bool) -> Result<StateBits, XarmError> {
-        Ok(self.request(reg::MOTION_EN, &[8, u8::from(enable)])?.state)
+        let timeout = self.config.reply_timeout.max(MOTION_ENABLE_TIMEOUT);
+        Ok(self.request_for(reg::MOTION_EN, &[8, u8::from(enable)], timeout)?.state)
+    }
+
+    /// Write set_state(4) and return without waiting for the reply (counted as outstanding,
+    /// discarded when it arrives). Allocates nothing; blocks at most the write timeout.
+    pub fn request_stop(&mut self) -> Result<(), XarmError> {
+        // Take the replies already here first (never blocks); a broken reply stream must not
+        // keep the stop from being written, so its error waits until after the write.
+        let drained = self.drain_nonblocking();
+        let t = self.take_transaction();
+        let n = encode_request(
+            &mut self.stop_buf,
+            t,
+            PROTOCOL_PRIVATE,
+            reg::SET_STATE,
+            &[arm_state::STOPPED],
+        )?;
+        (&self.sock).write_all(&self.stop_buf[..n])?;
+        self.outstanding += 1;
+        drained
     }
 
     pub fn set_mode(&mut self, mode: u8) -> Result<StateBits, XarmError> {
@@ -444,8 +509,9 @@ impl Arm for XarmClient {
         }
     }
 
+    /// set_state(4), not waiting for the reply: see [`XarmClient::request_stop`].
     fn stop(&mut self) -> Result<(), XarmError> {
-        self.set_state(arm_state::STOPPED).map(|_| ())
+        self.request_stop()
     }
 
     fn joint_positions(&mut self) -> Result<Joints, XarmError> {

@@ -55,6 +55,12 @@ pub enum CodecError {
     Overflow(usize),
     #[error("reply to register {got} while waiting for register {want}")]
     RegisterMismatch { got: u8, want: u8 },
+    #[error("reply with protocol id {got:#06x} to a request sent with {want:#06x}")]
+    ProtocolMismatch { got: u16, want: u16 },
+    #[error("report field {field} = {value} out of range (at most {max})")]
+    ReportField { field: &'static str, value: u8, max: u8 },
+    #[error("report size changed from {first} to {got} bytes on one stream")]
+    ReportSizeChanged { first: usize, got: usize },
     #[error("reply payload of register {register} too short: {got} bytes, need {need}")]
     Payload { register: u8, got: usize, need: usize },
 }

@@ -15,6 +15,8 @@ pub const ERR_SELF_COLLISION: u8 = 22;
 pub const ERR_JOINT_LIMIT: u8 = 23;
 /// Speed beyond the limit.
 pub const ERR_SPEED_LIMIT: u8 = 24;
+/// Joint speed measured by the servos beyond the limit.
+pub const ERR_FEEDBACK_SPEED: u8 = 30;
 /// A collision caused abnormal motor current (contact with the scene).
 pub const ERR_COLLISION: u8 = 31;
 /// Safety boundary (reduced mode fence) reached.

@@ -5,6 +5,10 @@
 //! no error codes, so the reader also keeps a side connection to 30001 (5 Hz) and merges its
 //! latest error and warning codes into every state it returns. A real box stops the arm on any
 //! error, so the state (4, stopped) shows the fault at 100 Hz and the code follows within 200 ms.
+//!
+//! A frame whose state, mode or sensitivities are out of range, or whose size differs from the
+//! stream's first, is an error (a fault of the link), never data: the official SDK closes the
+//! stream on such frames.
 
 use super::codec::CodecError;
 use super::error::XarmError;
@@ -55,6 +59,9 @@ pub struct ReportReader {
     rx: FrameAccumulator<RX_CAP>,
     codes: Option<(Socket, FrameAccumulator<RX_CAP>)>,
     last_codes: (u8, u8),
+    /// Size of the first frame of each stream (report, codes): a box never changes it.
+    first_size: Option<usize>,
+    first_codes_size: Option<usize>,
     seq: u64,
     clock: MonotonicClock,
 }
@@ -100,6 +107,8 @@ impl ReportReader {
             rx: FrameAccumulator::new(),
             codes,
             last_codes: (0, 0),
+            first_size: None,
+            first_codes_size: None,
             seq: 0,
             clock: config.clock,
         })
@@ -115,6 +124,7 @@ impl ReportReader {
         let Some((sock, rx)) = self.codes.as_mut() else { return Ok(()) };
         loop {
             while rx.poll_frame(report_frame_len)?.is_some() {
+                same_size(&mut self.first_codes_size, rx.frame().len())?;
                 let r = decode_report(rx.frame(), ReportKind::Normal)?;
                 self.last_codes = (r.error_code, r.warn_code);
             }
@@ -127,6 +137,18 @@ impl ReportReader {
     }
 }
 
+/// A stream's frames all have the size of its first (the SDK closes a stream whose size changes).
+fn same_size(first: &mut Option<usize>, got: usize) -> Result<(), CodecError> {
+    match *first {
+        None => {
+            *first = Some(got);
+            Ok(())
+        }
+        Some(f) if f == got => Ok(()),
+        Some(f) => Err(CodecError::ReportSizeChanged { first: f, got }),
+    }
+}
+
 impl ErrorType for ReportReader {
     type Error = XarmError;
 }
@@ -136,6 +158,7 @@ impl ArmReports for ReportReader {
         loop {
             if self.rx.poll_frame(report_frame_len)?.is_some() {
                 let received_ns = self.clock.now_ns();
+                same_size(&mut self.first_size, self.rx.frame().len())?;
                 let r = decode_report(self.rx.frame(), self.kind)?;
                 if self.kind.has_codes() {
                     self.last_codes = (r.error_code, r.warn_code);

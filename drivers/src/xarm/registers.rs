@@ -27,6 +27,8 @@ pub const GET_ERROR: u8 = 15;
 pub const CLEAN_ERR: u8 = 16;
 /// Clear the controller warning.
 pub const CLEAN_WAR: u8 = 17;
+/// Brake/joint power: params `[axis (1-7, 8 = all), 0 disable | 1 unlock]` (a system reset).
+pub const SET_BRAKE: u8 = 18;
 /// Set the mode: params `[mode]` or `[mode, detection_param]` (firmware >= 1.10).
 pub const SET_MODE: u8 = 19;
 /// Point-to-point joint move (mode 0): 7 joints, speed, acceleration, time (10 x f32).
@@ -92,6 +94,7 @@ pub fn name(register: u8) -> &'static str {
         GET_ERROR => "get_error",
         CLEAN_ERR => "clean_error",
         CLEAN_WAR => "clean_warn",
+        SET_BRAKE => "set_brake",
         SET_MODE => "set_mode",
         MOVE_JOINT => "move_joint",
         MOVE_SERVOJ => "servo_j",

@@ -12,6 +12,22 @@ use hitl_hal::Joints;
 pub const MIN_REPORT_LEN: usize = 87;
 /// Largest report accepted; the 30000 report is 804 bytes in the SDK's newest layout.
 pub const MAX_REPORT_LEN: usize = 1024;
+/// Largest state a box reports (the SDK drops a normal/rich report stream above it).
+pub const MAX_STATE: u8 = 9;
+/// Largest mode a box reports (same).
+pub const MAX_MODE: u8 = 11;
+/// Largest collision and teach sensitivity (same).
+pub const MAX_SENSITIVITY: u8 = 5;
+
+/// A field outside what a box can send makes the whole report a fault, not data (the official
+/// SDK closes the report stream on such a frame).
+fn check_field(field: &'static str, value: u8, max: u8) -> Result<(), CodecError> {
+    if value > max {
+        Err(CodecError::ReportField { field, value, max })
+    } else {
+        Ok(())
+    }
+}
 
 /// The report ports.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
@@ -146,6 +162,8 @@ pub fn decode_report(frame: &[u8], kind: ReportKind) -> Result<ReportData, Codec
         r.timestamp_us = u64::from_be_bytes(ts);
         r.state = frame[12] & 0x0F;
         r.mode = frame[12] >> 4;
+        check_field("state", r.state, MAX_STATE)?;
+        check_field("mode", r.mode, MAX_MODE)?;
         r.cmd_num = u16::from_be_bytes([frame[13], frame[14]]);
         r.target_q = f32s(frame, 32);
         r.q = f32s(frame, 116);
@@ -157,10 +175,16 @@ pub fn decode_report(frame: &[u8], kind: ReportKind) -> Result<ReportData, Codec
     }
     r.state = frame[4] & 0x0F;
     r.mode = frame[4] >> 4;
+    check_field("state", r.state, MAX_STATE)?;
+    check_field("mode", r.mode, MAX_MODE)?;
     r.cmd_num = u16::from_be_bytes([frame[5], frame[6]]);
     r.q = f32s(frame, 7);
     r.tcp_pose = f32s(frame, 35);
     if kind.has_codes() {
+        if size >= 133 {
+            check_field("collision sensitivity", frame[131], MAX_SENSITIVITY)?;
+            check_field("teach sensitivity", frame[132], MAX_SENSITIVITY)?;
+        }
         r.brake_mask = frame[87];
         r.enable_mask = frame[88];
         r.error_code = frame[89];
@@ -299,6 +323,48 @@ mod tests {
             if kind == ReportKind::RealTime {
                 assert_eq!(d.timestamp_us, 123_456);
                 assert!((d.target_q[0] - 0.15).abs() < 1e-6);
+            }
+        }
+    }
+
+    #[test]
+    fn out_of_range_fields_are_faults_not_data() {
+        let id = BoxIdentity {
+            robot_type: 7,
+            axis: 7,
+            version: "v2.5.0",
+            joint_limits: [(-1.0, 1.0); 7],
+        };
+        let r = ReportData { state: 2, mode: 1, ..ReportData::default() };
+        let mut buf = [0u8; MAX_REPORT_LEN];
+        for kind in ReportKind::ALL {
+            let n = encode_report(&mut buf, kind, &r, &id).expect("fits");
+            let at = if kind == ReportKind::RealTime { 12 } else { 4 };
+            buf[at] = 0x1A; // state 10
+            assert_eq!(
+                decode_report(&buf[..n], kind),
+                Err(CodecError::ReportField { field: "state", value: 10, max: 9 })
+            );
+            buf[at] = 0xC2; // mode 12
+            assert_eq!(
+                decode_report(&buf[..n], kind),
+                Err(CodecError::ReportField { field: "mode", value: 12, max: 11 })
+            );
+            buf[at] = 0xB9; // mode 11, state 9: the largest a box sends
+            assert!(decode_report(&buf[..n], kind).is_ok());
+            if kind.has_codes() {
+                buf[131] = 6;
+                assert_eq!(
+                    decode_report(&buf[..n], kind),
+                    Err(CodecError::ReportField {
+                        field: "collision sensitivity",
+                        value: 6,
+                        max: 5
+                    })
+                );
+                buf[131] = 5;
+                buf[132] = 200;
+                assert!(decode_report(&buf[..n], kind).is_err());
             }
         }
     }

@@ -1,8 +1,10 @@
-//! The control box's state machine over a [`Plant`]: motors, states, modes, error and warning
-//! codes, servo and joint moves, joint-limit and collision errors, and the replies it gives.
+//! The control box's state machine over a [`Plant`]: identity (serial number, firmware),
+//! motors, states, modes, the "system reset" registers, error and warning codes, servo and joint
+//! moves, the firmware's joint-limit, speed and collision errors, and the replies it gives.
 //!
 //! Pure logic: no sockets, no threads. The command server calls [`ArmBox::handle`] for every
-//! request; the stepping thread calls [`ArmBox::step`] every physics step.
+//! request (with the time it handles it); the stepping thread calls [`ArmBox::step`] every
+//! physics step. Every rule and its source is in `docs/xarm-protocol.md`.
 
 use crate::plant::{Collision, Plant};
 use hitl_drivers::xarm::codes;
@@ -11,12 +13,26 @@ use hitl_drivers::xarm::report::{BoxIdentity, ReportData};
 use hitl_hal::{Joints, DOF};
 use nalgebra::Vector3;
 
-/// Firmware version the stub answers (>= 1.10 so the SDK sends two-byte set_mode, and >= 1.8.6
-/// so it switches to protocol id 3 as with a current box).
-pub const VERSION: &str = "7,7,XS1303HITL01,XX1303HITL01,v2.5.0";
-/// Arm and control-box serial numbers.
-pub const ARM_SN: &str = "XS1303HITL01";
-pub const BOX_SN: &str = "XX1303HITL01";
+/// Arm serial number the stub answers unless told otherwise: a current xArm7 (digits [2:6] in
+/// 1305..=8499, so the official SDK and the controller pick the current joint-limit table).
+pub const DEFAULT_ARM_SN: &str = "XS1305HITL0001";
+/// Control-box serial number (digits [2:6] >= 1300: the SDK's "1300" control box).
+pub const DEFAULT_BOX_SN: &str = "XX1305HITL0001";
+/// Firmware version the stub answers unless told otherwise (>= 1.10 so the SDK sends two-byte
+/// set_mode, >= 1.8.6 so it switches to protocol id 3, >= 2.3.0 so error 60 applies).
+pub const DEFAULT_FIRMWARE: &str = "v2.5.0";
+/// Longest serial number accepted (a box's field is 40 bytes for both, NUL separated).
+pub const MAX_SN_LEN: usize = 16;
+
+/// The firmware's joint speed limit, 180 deg/s (rad/s): servo_j targets that ask for more raise
+/// error 24, measured joint speeds above it error 30.
+pub const MAX_JOINT_SPEED: f64 = std::f64::consts::PI;
+/// TCP linear speed limit in servo_j (firmware >= 2.3.0): 1.2 x 1000 mm/s, m/s (error 60).
+pub const MAX_SERVO_J_TCP_SPEED: f64 = 1.2;
+/// The box's control period: the shortest time a servo_j step is taken over, s.
+pub const BOX_PERIOD_S: f64 = 0.004;
+/// The longest time a servo_j step is taken over (a first setpoint, or one after a pause), s.
+pub const MAX_STEP_INTERVAL_S: f64 = 0.05;
 /// Joint speed above which the arm reports itself moving (state 1), rad/s.
 const MOVING_SPEED: f64 = 0.005;
 /// Largest reply data the box produces (get_joint_pos with positions, velocities, efforts).
@@ -36,6 +52,75 @@ impl BoxReply {
     }
 }
 
+/// Who the box says it is: serial numbers and firmware version.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct BoxIdentityConfig {
+    pub arm_sn: String,
+    pub box_sn: String,
+    /// `vMAJOR.MINOR.PATCH`.
+    pub firmware: String,
+}
+
+impl Default for BoxIdentityConfig {
+    fn default() -> Self {
+        Self {
+            arm_sn: DEFAULT_ARM_SN.into(),
+            box_sn: DEFAULT_BOX_SN.into(),
+            firmware: DEFAULT_FIRMWARE.into(),
+        }
+    }
+}
+
+/// Why an identity was refused.
+#[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
+pub enum IdentityError {
+    #[error("serial number {0:?}: expected 1-16 ASCII letters and digits")]
+    Serial(String),
+    #[error("firmware version {0:?}: expected vMAJOR.MINOR.PATCH (numbers)")]
+    Firmware(String),
+}
+
+impl BoxIdentityConfig {
+    /// The firmware version as numbers, if well formed.
+    pub fn firmware_number(&self) -> Option<(u32, u32, u32)> {
+        parse_firmware(&self.firmware)
+    }
+
+    /// Refuse what a box could not say (the version text must fit its 40-byte field).
+    pub fn validate(&self) -> Result<(), IdentityError> {
+        for sn in [&self.arm_sn, &self.box_sn] {
+            let ok = !sn.is_empty()
+                && sn.len() <= MAX_SN_LEN
+                && sn.bytes().all(|b| b.is_ascii_alphanumeric());
+            if !ok {
+                return Err(IdentityError::Serial(sn.clone()));
+            }
+        }
+        match parse_firmware(&self.firmware) {
+            Some(_) if self.firmware.len() <= 12 => Ok(()),
+            _ => Err(IdentityError::Firmware(self.firmware.clone())),
+        }
+    }
+
+    /// The get_version text: `axis,type,arm_sn,box_sn,firmware` (xArm7, type 7).
+    fn version_text(&self) -> String {
+        format!("7,7,{},{},{}", self.arm_sn, self.box_sn, self.firmware)
+    }
+}
+
+/// `vX.Y.Z` as numbers.
+pub fn parse_firmware(v: &str) -> Option<(u32, u32, u32)> {
+    let mut it = v.strip_prefix('v')?.split('.').map(|p| {
+        if !p.is_empty() && p.len() <= 4 && p.bytes().all(|b| b.is_ascii_digit()) {
+            p.parse::<u32>().ok()
+        } else {
+            None
+        }
+    });
+    let (a, b, c) = (it.next()??, it.next()??, it.next()??);
+    it.next().is_none().then_some((a, b, c))
+}
+
 /// What the box is doing, for handles and tests.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub struct BoxStatus {
@@ -50,6 +135,11 @@ pub struct BoxStatus {
 pub struct ArmBox {
     plant: Box<dyn Plant>,
     limits: [(f64, f64); DOF],
+    identity: BoxIdentityConfig,
+    /// get_version's 40-byte answer.
+    version_text: String,
+    /// Error 60 exists from firmware 2.3.0 on.
+    checks_tcp_speed: bool,
     enabled: bool,
     state: u8,
     mode: u8,
@@ -59,6 +149,9 @@ pub struct ArmBox {
     target: Joints,
     /// A planned joint move in mode 0: goal and joint speed (rad/s).
     moving_to: Option<(Joints, f64)>,
+    /// When the last servo_j target was taken (or the arm was readied), seconds on the clock
+    /// `handle` is given.
+    last_servo_s: Option<f64>,
     /// Offset added to reported joints (deviation fault).
     deviation: f64,
     /// The e-stop input is pressed: error 2 cannot be cleared.
@@ -99,12 +192,26 @@ fn read_f32(params: &[u8], index: usize) -> Option<f64> {
 }
 
 impl ArmBox {
-    /// A box at power-up: motors off, stopped, mode 0, the arm resting at `initial_q`.
-    pub fn new(mut plant: Box<dyn Plant>, initial_q: Joints, limits: [(f64, f64); DOF]) -> Self {
+    /// A box at power-up: motors off, stopped, mode 0, the arm resting at `initial_q`; it
+    /// enforces `limits` (the joint-limit table of the arm `identity` names) and answers with
+    /// `identity` (validate it first: text that does not fit is cut).
+    pub fn new(
+        mut plant: Box<dyn Plant>,
+        initial_q: Joints,
+        limits: [(f64, f64); DOF],
+        identity: BoxIdentityConfig,
+    ) -> Self {
         plant.reset(&initial_q);
+        let mut version_text = identity.version_text();
+        version_text.truncate(40);
+        let checks_tcp_speed = identity.firmware_number().is_some_and(|v| v >= (2, 3, 0));
         Self {
             plant,
             limits,
+            identity,
+            version_text,
+            checks_tcp_speed,
+            last_servo_s: None,
             enabled: false,
             state: arm_state::STOPPED,
             mode: mode::POSITION,
@@ -205,19 +312,30 @@ impl ArmBox {
         q.iter().zip(self.limits.iter()).any(|(v, (lo, hi))| !(*v >= *lo && *v <= *hi))
     }
 
-    /// Answer one request.
-    pub fn handle(&mut self, register: u8, params: &[u8]) -> BoxReply {
+    /// A "system reset" (registers 11, 16, 18, 19 and set_state(4)): the ongoing motion ends
+    /// and the command cache is cleared, "the same as the STOP state"; the arm moves again only
+    /// after set_state(0).
+    fn system_reset(&mut self) {
+        self.state = arm_state::STOPPED;
+        self.hold();
+        self.last_servo_s = None;
+    }
+
+    /// Answer one request handled at `now_s` (seconds on any monotonic clock: servo_j speeds
+    /// are measured on it).
+    pub fn handle(&mut self, register: u8, params: &[u8], now_s: f64) -> BoxReply {
         self.commands += 1;
         let mut data = [0u8; MAX_REPLY_DATA];
         let mut invalid = false;
         let len = match register {
             reg::GET_VERSION => {
-                let v = VERSION.as_bytes();
+                let v = self.version_text.as_bytes();
                 data[..v.len()].copy_from_slice(v);
                 40
             }
             reg::GET_ROBOT_SN => {
-                let (a, b) = (ARM_SN.as_bytes(), BOX_SN.as_bytes());
+                let (a, b) = (self.identity.arm_sn.as_bytes(), self.identity.box_sn.as_bytes());
+                let (a, b) = (&a[..a.len().min(MAX_SN_LEN)], &b[..b.len().min(MAX_SN_LEN)]);
                 data[..a.len()].copy_from_slice(a);
                 data[a.len() + 1..a.len() + 1 + b.len()].copy_from_slice(b);
                 40
@@ -229,40 +347,36 @@ impl ArmBox {
             reg::GET_HD_TYPES => 2,
             reg::MOTION_EN => {
                 match params {
-                    [_axis, en, ..] if *en != 0 => {
-                        if !self.estop {
+                    [axis @ 1..=8, en @ (0 | 1)] => {
+                        if *en == 0 {
+                            self.enabled = false;
+                        } else if *axis == 8 && !self.estop {
                             self.enabled = true;
                         }
-                    }
-                    [_axis, _, ..] => {
-                        self.enabled = false;
-                        self.state = arm_state::STOPPED;
-                        self.hold();
+                        self.system_reset();
                     }
                     _ => invalid = true,
                 }
                 0
             }
             reg::SET_STATE => {
-                match params.first().copied() {
-                    Some(arm_state::START) => {
+                match params {
+                    [arm_state::START] => {
                         if self.enabled && self.error == 0 {
                             if !matches!(self.state, arm_state::MOVING | arm_state::SLEEPING) {
                                 self.hold();
+                                self.last_servo_s = None;
                             }
                             self.state = arm_state::SLEEPING;
                         }
                     }
-                    Some(arm_state::PAUSED) => {
+                    [arm_state::PAUSED] => {
                         if self.ready() {
                             self.state = arm_state::PAUSED;
                             self.hold();
                         }
                     }
-                    Some(arm_state::STOPPED) => {
-                        self.state = arm_state::STOPPED;
-                        self.hold();
-                    }
+                    [arm_state::STOPPED] => self.system_reset(),
                     _ => invalid = true,
                 }
                 0
@@ -278,29 +392,50 @@ impl ArmBox {
                 2
             }
             reg::CLEAN_ERR => {
-                if !self.estop {
-                    self.error = 0;
+                if params.is_empty() {
+                    if !self.estop {
+                        self.error = 0;
+                    }
+                    self.system_reset();
+                } else {
+                    invalid = true;
                 }
                 0
             }
             reg::CLEAN_WAR => {
-                self.warn = 0;
+                if params.is_empty() {
+                    self.warn = 0;
+                } else {
+                    invalid = true;
+                }
+                0
+            }
+            reg::SET_BRAKE => {
+                match params {
+                    [1..=8, value @ (0 | 1)] => {
+                        // 0 "disable joint": a joint without power is not enabled.
+                        if *value == 0 {
+                            self.enabled = false;
+                        }
+                        self.system_reset();
+                    }
+                    _ => invalid = true,
+                }
                 0
             }
             reg::SET_MODE => {
-                match params.first().copied() {
-                    Some(m @ (mode::POSITION | mode::SERVO)) => {
-                        if m != self.mode {
-                            self.mode = m;
-                            self.hold();
-                        }
+                match params {
+                    [m @ (mode::POSITION | mode::SERVO)]
+                    | [m @ (mode::POSITION | mode::SERVO), _] => {
+                        self.mode = *m;
+                        self.system_reset();
                     }
                     _ => invalid = true,
                 }
                 0
             }
             reg::MOVE_SERVOJ => {
-                self.servo_j(params, &mut invalid);
+                self.servo_j(params, now_s, &mut invalid);
                 0
             }
             reg::MOVE_JOINT => {
@@ -328,6 +463,8 @@ impl ArmBox {
                 {
                     self.unknown_registers.push(register);
                 }
+                // Warning 13, "command does not exist"; the reply also says invalid.
+                self.warn = codes::WARN_NO_SUCH_COMMAND;
                 invalid = true;
                 0
             }
@@ -339,11 +476,15 @@ impl ArmBox {
         BoxReply { state, len, data }
     }
 
-    fn servo_j(&mut self, params: &[u8], invalid: &mut bool) {
+    fn servo_j(&mut self, params: &[u8], now_s: f64, invalid: &mut bool) {
         let Some(q) = read_joints(params) else {
             *invalid = true;
             return;
         };
+        if params.len() != 40 {
+            *invalid = true;
+            return;
+        }
         if self.mode != mode::SERVO || !self.ready() {
             return;
         }
@@ -351,7 +492,25 @@ impl ArmBox {
             self.raise_error(codes::ERR_JOINT_LIMIT);
             return;
         }
+        // The step from the last target, over the time since it (one box period at least).
+        let dt = match self.last_servo_s {
+            Some(t) => (now_s - t).clamp(BOX_PERIOD_S, MAX_STEP_INTERVAL_S),
+            None => MAX_STEP_INTERVAL_S,
+        };
+        let step = q.iter().zip(self.target.iter()).map(|(a, b)| (a - b).abs()).fold(0.0, f64::max);
+        if step / dt > MAX_JOINT_SPEED {
+            self.raise_error(codes::ERR_SPEED_LIMIT);
+            return;
+        }
+        if self.checks_tcp_speed {
+            let p = |q: &Joints| hitl_trajectories::kinematics::flange_pose(q).translation.vector;
+            if (p(&q) - p(&self.target)).norm() / dt > MAX_SERVO_J_TCP_SPEED {
+                self.raise_error(codes::ERR_SERVOJ_LINEAR_SPEED);
+                return;
+            }
+        }
         self.servo_commands += 1;
+        self.last_servo_s = Some(now_s);
         self.moving_to = None;
         self.target = q;
         self.plant.command(&q);
@@ -370,7 +529,7 @@ impl ArmBox {
             return;
         }
         let speed =
-            if speed.is_finite() && speed > 0.0 { speed.min(std::f64::consts::PI) } else { 0.35 };
+            if speed.is_finite() && speed > 0.0 { speed.min(MAX_JOINT_SPEED) } else { 0.35 };
         self.moving_to = Some((q, speed));
     }
 
@@ -401,6 +560,12 @@ impl ArmBox {
             }
             None => self.in_contact = false,
         }
+        if self.enabled && self.error == 0 {
+            let fast = self.plant.velocities().iter().any(|v| !(v.abs() <= MAX_JOINT_SPEED));
+            if fast {
+                self.raise_error(codes::ERR_FEEDBACK_SPEED);
+            }
+        }
         if matches!(self.state, arm_state::MOVING | arm_state::SLEEPING) {
             let moving = self.plant.velocities().iter().any(|v| v.abs() > MOVING_SPEED)
                 || self.moving_to.is_some();
@@ -430,8 +595,23 @@ impl ArmBox {
         }
     }
 
-    pub fn identity(&self) -> BoxIdentity<'static> {
-        BoxIdentity { robot_type: 7, axis: 7, version: "v2.5.0", joint_limits: self.limits }
+    pub fn identity(&self) -> BoxIdentity<'_> {
+        BoxIdentity {
+            robot_type: 7,
+            axis: 7,
+            version: &self.identity.firmware,
+            joint_limits: self.limits,
+        }
+    }
+
+    /// The serial numbers and firmware the box answers with.
+    pub fn identity_config(&self) -> &BoxIdentityConfig {
+        &self.identity
+    }
+
+    /// The joint limits the box enforces.
+    pub fn joint_limits(&self) -> [(f64, f64); DOF] {
+        self.limits
     }
 }
 

@@ -1,6 +1,8 @@
 //! Protocol benchmarks against a running stub on loopback: what the project's client really
-//! costs per servo setpoint, request round trips, the command rate the stub sustains, and the
-//! physics thread's real-time factor with nothing rendering.
+//! costs per servo setpoint and request round trips (on a stub without the box's command pacing,
+//! so the figures are the client's and the link's), the command rate the stub serves (with the
+//! box's pacing, as every stub runs), and the physics thread's real-time factor with nothing
+//! rendering.
 
 use super::{Stub, StubConfig, StubError};
 use crate::plant::Plant;
@@ -47,8 +49,11 @@ fn micros(mut v: Vec<f64>) -> Value {
 
 /// Run the protocol benchmarks on a fresh stub around `plant` (ephemeral loopback ports).
 pub fn bench_protocol(plant: Box<dyn Plant>, opts: BenchOptions) -> Result<Value, BenchError> {
-    let config =
-        StubConfig { report_ports: vec![(ReportKind::Real, 0)], ..StubConfig::ephemeral() };
+    let config = StubConfig {
+        report_ports: vec![(ReportKind::Real, 0)],
+        max_command_rate_hz: None,
+        ..StubConfig::ephemeral()
+    };
     let q0 = config.initial_q;
     let stub = Stub::start(config, plant)?;
     let mut client = XarmClient::connect(stub.cmd_addr(), ClientConfig::default())?;
@@ -83,20 +88,9 @@ pub fn bench_protocol(plant: Box<dyn Plant>, opts: BenchOptions) -> Result<Value
         client.joint_positions()?;
         get.push(t.elapsed().as_secs_f64() * 1e6);
     }
-    // Command rate: stream servo_j as fast as the link takes them, then wait for every reply.
-    let before = stub.with_box(|b| b.servo_commands);
-    let t = Instant::now();
-    let mut i = 0;
-    while t.elapsed() < opts.flood {
-        client.servo_joint_pipelined(&pose(i), 256)?;
-        i += 1;
-        if client.outstanding() >= 200 {
-            client.flush_servo_replies()?;
-        }
-    }
-    client.flush_servo_replies()?;
-    let flood_s = t.elapsed().as_secs_f64();
-    let served = stub.with_box(|b| b.servo_commands) - before;
+    // Command rate: stream servo_j as fast as the link takes them to a stub paced as a box is
+    // (250 per second), then wait for every reply.
+    let (served, flood_s) = flood(q0, opts.flood)?;
     client.set_servo_replies(ServoReplies::Wait);
     client.stop()?;
     let phys = stub.physics();
@@ -111,7 +105,8 @@ pub fn bench_protocol(plant: Box<dyn Plant>, opts: BenchOptions) -> Result<Value
         "get_joints_round_trip": micros(get),
         "command_rate": {
             "pipelined_servo_j_per_s": served as f64 / flood_s,
-            "wait_servo_j_per_s": 1e6 / wait_mean,
+            "box_limit_per_s": super::BOX_COMMAND_RATE_HZ,
+            "unpaced_wait_servo_j_per_s": 1e6 / wait_mean,
         },
         "physics": {
             "dt_s": StubConfig::default().physics_dt,
@@ -124,4 +119,59 @@ pub fn bench_protocol(plant: Box<dyn Plant>, opts: BenchOptions) -> Result<Value
             } else { 0.0 },
         },
     }))
+}
+
+/// A plant that is wherever it is told to be (the flood measures the command port only).
+struct Follower(hitl_hal::Joints);
+
+impl Plant for Follower {
+    fn joints(&self) -> hitl_hal::Joints {
+        self.0
+    }
+    fn velocities(&self) -> hitl_hal::Joints {
+        [0.0; 7]
+    }
+    fn command(&mut self, q: &hitl_hal::Joints) {
+        self.0 = *q;
+    }
+    fn reset(&mut self, q: &hitl_hal::Joints) {
+        self.0 = *q;
+    }
+    fn advance(&mut self, _dt: f64) {}
+    fn time(&self) -> f64 {
+        0.0
+    }
+    fn collision(&self) -> Option<crate::plant::Collision> {
+        None
+    }
+}
+
+/// Flood a stub paced like a box with pipelined servo_j for `span`; returns the setpoints it
+/// took and the seconds until the last reply.
+fn flood(q0: hitl_hal::Joints, span: Duration) -> Result<(u64, f64), BenchError> {
+    let config = StubConfig {
+        report_ports: vec![(ReportKind::Real, 0)],
+        initial_q: q0,
+        ..StubConfig::ephemeral()
+    };
+    let stub = Stub::start(config, Box::new(Follower(q0)))?;
+    let mut client = XarmClient::connect(stub.cmd_addr(), ClientConfig::default())?;
+    client.enable_servo()?;
+    let before = stub.with_box(|b| b.servo_commands);
+    let t = Instant::now();
+    let mut i = 0u32;
+    while t.elapsed() < span {
+        let mut q = q0;
+        q[0] += 1e-4 * f64::from(i % 100);
+        client.servo_joint_pipelined(&q, 256)?;
+        i += 1;
+        if client.outstanding() >= 100 {
+            client.flush_servo_replies()?;
+        }
+    }
+    client.flush_servo_replies()?;
+    let flood_s = t.elapsed().as_secs_f64();
+    let served = stub.with_box(|b| b.servo_commands) - before;
+    stub.shutdown();
+    Ok((served, flood_s))
 }

@@ -1,5 +1,7 @@
 //! The command port: accepts connections, cuts each byte stream into request frames, answers
-//! each through the box, and closes a connection on garbage, on shutdown or on a
+//! each through the box no faster than a box does (every frame takes a slot of the shared
+//! [`CommandPacer`](super::CommandPacer): 250 per second, so a faster stream backs up in the
+//! socket as on a real box), and closes a connection on garbage, on shutdown or on a
 //! drop-connection fault. A stall-replies fault stops reading (and so answering) without closing.
 
 use super::{Shared, POLL};
@@ -116,6 +118,7 @@ fn answer_all(
 ) -> Result<(), ConnError> {
     while !shared.replies_stalled() && rx.poll_frame(any_frame_len)?.is_some() {
         let req = decode_request(rx.frame())?;
+        let now_s = shared.pace_command();
         let n = match req.protocol {
             // The SDK's keep-alive frames need no answer.
             PROTOCOL_HEARTBEAT => continue,
@@ -128,7 +131,7 @@ fn answer_all(
                 9
             }
             _ => {
-                let reply = shared.lock_arm().handle(req.register, req.params);
+                let reply = shared.lock_arm().handle(req.register, req.params, now_s);
                 encode_reply(
                     out,
                     req.transaction,

@@ -8,7 +8,8 @@
 //! - [`bench`]: protocol benchmarks against a running stub.
 //!
 //! Threads share one [`Shared`] value: the box behind a mutex (held for one request or one physics
-//! step at a time), flags and counters as atomics.
+//! step at a time), flags and counters as atomics, and the command pacer that holds the box to
+//! the rate a control box receives commands at (250 per second).
 
 pub mod arm_box;
 pub mod bench;
@@ -18,7 +19,7 @@ pub mod stepper;
 
 use crate::faults::{Fault, FaultKind, SimInputs, SimInputsReader};
 use crate::plant::Plant;
-use arm_box::{ArmBox, BoxStatus};
+use arm_box::{ArmBox, BoxIdentityConfig, BoxStatus, IdentityError};
 use hitl_drivers::xarm::report::ReportKind;
 use hitl_hal::Joints;
 use std::net::{IpAddr, Ipv4Addr, SocketAddr, TcpListener};
@@ -34,6 +35,10 @@ pub enum StubError {
     NotLoopback(IpAddr),
     #[error("cannot listen on {addr} ({what}): {source}")]
     Bind { addr: SocketAddr, what: &'static str, source: std::io::Error },
+    #[error("stub: {0}")]
+    Identity(#[from] IdentityError),
+    #[error("stub: command rate {0} per second must be a positive number")]
+    CommandRate(f64),
     #[error("stub: {0}")]
     Io(#[from] std::io::Error),
 }
@@ -52,11 +57,20 @@ pub struct StubConfig {
     pub faults: Vec<Fault>,
     /// The arm's pose at power-up.
     pub initial_q: Joints,
-    /// Joint limits the box enforces on servo_j and move_joint targets.
-    pub joint_limits: [(f64, f64); 7],
+    /// Serial numbers and firmware the box answers with (a current xArm7 by default).
+    pub identity: BoxIdentityConfig,
+    /// Joint limits the box enforces on servo_j and move_joint targets; `None`: the table of
+    /// the arm `identity` names (as the firmware and the official SDK pick it).
+    pub joint_limits: Option<[(f64, f64); 7]>,
+    /// Commands the command port handles per second at most, over all connections (a box
+    /// receives at most 250); `None` only for benchmarks of the client itself.
+    pub max_command_rate_hz: Option<f64>,
     /// Physics step, seconds.
     pub physics_dt: f64,
 }
+
+/// The rate a control box receives commands at, at most (UFACTORY: 250 Hz).
+pub const BOX_COMMAND_RATE_HZ: f64 = 250.0;
 
 impl Default for StubConfig {
     fn default() -> Self {
@@ -67,7 +81,9 @@ impl Default for StubConfig {
             report_ports: ReportKind::ALL.iter().map(|k| (*k, k.default_port())).collect(),
             faults: Vec::new(),
             initial_q: [0.0, -0.5, 0.0, 0.9, 0.0, 1.4, 0.0],
-            joint_limits: hitl_trajectories::kinematics::JOINT_LIMITS,
+            identity: BoxIdentityConfig::default(),
+            joint_limits: None,
+            max_command_rate_hz: Some(BOX_COMMAND_RATE_HZ),
             physics_dt: 0.002,
         }
     }
@@ -82,6 +98,49 @@ impl StubConfig {
             report_ports: ReportKind::ALL.iter().map(|k| (*k, 0)).collect(),
             ..Self::default()
         }
+    }
+
+    /// Answer as the arm with serial number `arm_sn` (the control box's number follows it).
+    pub fn with_serial(mut self, arm_sn: &str) -> Self {
+        self.identity.arm_sn = arm_sn.to_string();
+        if let Some(rest) = arm_sn.get(2..) {
+            self.identity.box_sn = format!("XX{rest}");
+        }
+        self
+    }
+
+    /// The joint limits the box enforces: the configured ones, else the serial number's table.
+    pub fn effective_joint_limits(&self) -> [(f64, f64); 7] {
+        self.joint_limits.unwrap_or_else(|| {
+            hitl_trajectories::joint_table::JointTable::for_serial(&self.identity.arm_sn).limits()
+        })
+    }
+}
+
+/// Spaces command handling at least one period apart over all connections, against absolute
+/// slots (sleep overshoot does not accumulate): requests that arrive faster wait in the socket.
+#[derive(Debug)]
+pub struct CommandPacer {
+    period_ns: u64,
+    /// The slot the last command was handled in, ns after start (`u64::MAX`: never).
+    last_slot_ns: Mutex<u64>,
+}
+
+impl CommandPacer {
+    fn new(rate_hz: Option<f64>) -> Self {
+        let period_ns = rate_hz.map(|r| (1e9 / r).round() as u64).unwrap_or(0);
+        Self { period_ns, last_slot_ns: Mutex::new(u64::MAX) }
+    }
+
+    /// Reserve the next slot at or after `now_ns`; returns it.
+    fn reserve(&self, now_ns: u64) -> u64 {
+        let mut last = self.last_slot_ns.lock().unwrap_or_else(|e| e.into_inner());
+        let slot = match *last {
+            u64::MAX => now_ns,
+            l => now_ns.max(l.saturating_add(self.period_ns)),
+        };
+        *last = slot;
+        slot
     }
 }
 
@@ -113,6 +172,7 @@ pub struct Shared {
     pub started: Instant,
     pub counters: Counters,
     pub physics_dt: f64,
+    pub pacer: CommandPacer,
 }
 
 impl Shared {
@@ -123,6 +183,24 @@ impl Shared {
 
     pub fn elapsed_ns(&self) -> u64 {
         u64::try_from(self.started.elapsed().as_nanos()).unwrap_or(u64::MAX)
+    }
+
+    /// Wait for this command's slot (no faster than a box handles commands); returns the time
+    /// it is handled at, seconds after start.
+    pub fn pace_command(&self) -> f64 {
+        let now = self.elapsed_ns();
+        if self.pacer.period_ns == 0 {
+            return now as f64 * 1e-9;
+        }
+        let slot = self.pacer.reserve(now);
+        loop {
+            let now = self.elapsed_ns();
+            if now >= slot {
+                break;
+            }
+            std::thread::sleep(Duration::from_nanos(slot - now));
+        }
+        slot as f64 * 1e-9
     }
 
     pub fn stopping(&self) -> bool {
@@ -188,6 +266,12 @@ impl Stub {
         if !config.bind.is_loopback() && !config.allow_remote {
             return Err(StubError::NotLoopback(config.bind));
         }
+        config.identity.validate()?;
+        if let Some(r) = config.max_command_rate_hz {
+            if !(r.is_finite() && r > 0.0) {
+                return Err(StubError::CommandRate(r));
+            }
+        }
         let cmd = bind(SocketAddr::new(config.bind, config.cmd_port), "command port")?;
         let mut report_listeners = Vec::new();
         for (kind, port) in &config.report_ports {
@@ -200,7 +284,12 @@ impl Stub {
             report_listeners.push((*kind, bind(SocketAddr::new(config.bind, *port), what)?));
         }
         let shared = Arc::new(Shared {
-            arm: Mutex::new(ArmBox::new(plant, config.initial_q, config.joint_limits)),
+            arm: Mutex::new(ArmBox::new(
+                plant,
+                config.initial_q,
+                config.effective_joint_limits(),
+                config.identity.clone(),
+            )),
             inputs: Arc::new(SimInputs::default()),
             stop: AtomicBool::new(false),
             drop_epoch: AtomicU64::new(0),
@@ -209,6 +298,7 @@ impl Stub {
             started: Instant::now(),
             counters: Counters::default(),
             physics_dt: config.physics_dt,
+            pacer: CommandPacer::new(config.max_command_rate_hz),
         });
         let cmd_addr = cmd.local_addr()?;
         let mut report_addrs = Vec::new();
