@@ -64,14 +64,16 @@ fn the_default_stub_is_a_current_xarm7_and_enforces_its_table() {
     let digits: u32 = sn[2..6].parse().expect("digits [2:6]");
     assert!((1305..=8499).contains(&digits), "{sn}");
     assert_eq!(config.effective_joint_limits(), JointTable::Xarm7Current.limits());
-    let legacy = StubConfig::default().with_serial("XS1303HITL0001");
+    let legacy = StubConfig::default().with_serial("XS1303HITL01");
     assert_eq!(legacy.effective_joint_limits(), JointTable::Xarm7Legacy.limits());
-    assert_eq!(legacy.identity.box_sn, "XX1303HITL0001");
+    assert_eq!(legacy.identity.box_sn, "XX1303HITL01");
     let mut bad = StubConfig::ephemeral();
     bad.identity.firmware = "2.5".into();
     assert!(Stub::start(bad, Box::new(LagPlant::new(None))).is_err());
-    let bad = StubConfig::ephemeral().with_serial("XS 1305,x");
-    assert!(Stub::start(bad, Box::new(LagPlant::new(None))).is_err());
+    for sn in ["XS 1305,x", "XS1305HITL000001"] {
+        let bad = StubConfig::ephemeral().with_serial(sn);
+        assert!(Stub::start(bad, Box::new(LagPlant::new(None))).is_err(), "{sn}");
+    }
 
     // J4 at -0.15 rad: inside the first arms' table, beyond a current arm's (-0.10472).
     let mut q = Q0;

@@ -76,7 +76,7 @@ fn rust_client_streams_servo_j_and_reads_back_the_pose() {
     let stub = start(None);
     let mut arm = client(&stub);
     assert!(arm.version().expect("version").ends_with("v2.5.0"));
-    assert_eq!(arm.serial_number().expect("sn"), "XS1305HITL0001");
+    assert_eq!(arm.serial_number().expect("sn"), "XS1305HITL01");
     let mut reports = reader(&stub);
     let first = reports.next_report().expect("first report");
     assert_eq!(first.state, 4, "a box at power-up is stopped");

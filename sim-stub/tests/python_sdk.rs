@@ -1,7 +1,10 @@
 //! Interoperability: the official xArm Python SDK (xarm-python-sdk, from `make setup`) drives the
 //! stub with its defaults: connect, clear errors, enable, mode 1, state 0, a servo_j stream, then
 //! reads the pose back through get_servo_angle and its report stream; then a joint-limit
-//! violation and a collision must show the real error codes (23, 31) to the SDK.
+//! violation and a collision must show the real error codes (23, 31) to the SDK; then clean,
+//! enable and set_mode(1) without set_state(0) (a system reset: servo_j is answered "not ready"
+//! and moves nothing), set_state(0) (it moves again), a servo_j step beyond 180 deg/s (error 24)
+//! and recovery. The stub answers as a current xArm7, so the SDK applies the current joint table.
 //!
 //! Run twice: with the MuJoCo lab plant (what `hitl stub` serves) and with a first-order plant.
 //! The stub runs on the box's own ports (502, 30000-30003) when they are free (we run as root);
@@ -14,6 +17,7 @@ use hitl_hal::Joints;
 use hitl_sim_stub::mujoco_plant::MujocoPlant;
 use hitl_sim_stub::plant::Plant;
 use hitl_sim_stub::{Stub, StubConfig, StubHandle};
+use hitl_trajectories::joint_table::JointTable;
 use hitl_trajectories::lab::LabConfig;
 use protocol_common::LagPlant;
 use serde_json::{json, Value};
@@ -81,7 +85,8 @@ fn sdk_session(
         assert_eq!(stub.cmd_addr().port(), 502);
     }
     let mut limit_q = q1;
-    limit_q[1] = 2.094395 + 0.001; // joint 2 just past its limit, inside the SDK's tolerance
+    // Joint 2 just past a current xArm7's limit, inside the SDK's 0.1 degree tolerance.
+    limit_q[1] = JointTable::Xarm7Current.limits()[1].1 + 0.001;
     let args = json!({
         "host": stub.cmd_addr().ip().to_string(),
         "cmd_port": stub.cmd_addr().port(),
@@ -107,7 +112,7 @@ fn sdk_session(
     assert_eq!(v["connected"], true, "{ctx}");
     assert_eq!(v["reported"], true, "{ctx}");
     assert_eq!(v["version_number"], json!([2, 5, 0]), "{ctx}");
-    assert_eq!(v["sn"], "XS1303HITL01", "{ctx}");
+    assert_eq!(v["sn"], StubConfig::default().identity.arm_sn.as_str(), "{ctx}");
     assert_eq!(v["enable_codes"], json!([0, 0, 0, 0, 0]), "{ctx}");
     assert_eq!(v["mode_after_enable"], 1, "{ctx}");
     assert_eq!(v["state_after_enable"], 2, "{ctx}");
@@ -135,6 +140,39 @@ fn sdk_session(
     assert_eq!(v["collision"]["err_warn"], json!([0, [31, 0]]), "{ctx}");
     assert_eq!(v["collision"]["state"], 4, "{ctx}");
     assert_eq!(v["collision"]["report_error"], 31, "{ctx}");
+
+    // The SDK picked the current table from the serial number: it refuses J4 = -0.15 itself.
+    assert_eq!(v["sdk_range_check"], -8, "{ctx}");
+
+    // System reset: clean_error and set_mode leave the arm stopped until set_state(0).
+    let seq = &v["reset_sequence"];
+    assert_eq!(seq["clean_error"], 0, "{ctx}");
+    assert_eq!(seq["state_after_clean"], 4, "{ctx}");
+    assert_eq!((&seq["motion_enable"], &seq["set_mode"]), (&json!(0), &json!(0)), "{ctx}");
+    assert_eq!(seq["state_after_mode"], 4, "{ctx}");
+    assert_eq!(seq["servo_without_state0"], 9, "SDK code 9, not ready: {ctx}");
+    let still = seq["moved_without_state0"].as_f64().expect("number");
+    assert!(still < 1e-3, "servo_j without set_state(0) moved the arm {still} rad: {ctx}");
+    assert_eq!(seq["set_state0"], 0, "{ctx}");
+    assert_eq!(seq["state_after_state0"], 2, "{ctx}");
+    assert_eq!(seq["servo_after_state0"], json!([0]), "{ctx}");
+    let moved = seq["moved_after_state0"].as_f64().expect("number");
+    assert!(moved > 0.015, "after set_state(0) the arm follows: {moved} rad: {ctx}");
+
+    // Speed: a 0.3 rad step in one setpoint is error 24, the arm stopped and not moved.
+    assert_eq!(seq["speed_servo_code"], 1, "{ctx}");
+    assert_eq!(seq["speed_err_warn"], json!([0, [24, 0]]), "{ctx}");
+    assert_eq!(seq["speed_state"], 4, "{ctx}");
+    assert_eq!(seq["speed_report_error"], 24, "{ctx}");
+    assert!(seq["speed_moved_j7"].as_f64().expect("number") < 0.01, "{ctx}");
+
+    // Recovery.
+    assert_eq!(seq["recover_codes"], json!([0, 0, 0, 0, 0]), "{ctx}");
+    assert_eq!(seq["recovered_state"], 2, "{ctx}");
+    assert_eq!(seq["recovered_err_warn"], json!([0, [0, 0]]), "{ctx}");
+    assert_eq!(seq["recovered_report_error"], 0, "{ctx}");
+    assert_eq!(seq["recovered_servo"], 0, "{ctx}");
+    eprintln!("SDK sequence: {seq:#}");
 
     assert_eq!(stub.with_box(|b| b.unknown_registers.clone()), Vec::<u8>::new(), "{ctx}");
     stub.shutdown();

@@ -15,14 +15,16 @@ use nalgebra::Vector3;
 
 /// Arm serial number the stub answers unless told otherwise: a current xArm7 (digits [2:6] in
 /// 1305..=8499, so the official SDK and the controller pick the current joint-limit table).
-pub const DEFAULT_ARM_SN: &str = "XS1305HITL0001";
+pub const DEFAULT_ARM_SN: &str = "XS1305HITL01";
 /// Control-box serial number (digits [2:6] >= 1300: the SDK's "1300" control box).
-pub const DEFAULT_BOX_SN: &str = "XX1305HITL0001";
+pub const DEFAULT_BOX_SN: &str = "XX1305HITL01";
 /// Firmware version the stub answers unless told otherwise (>= 1.10 so the SDK sends two-byte
 /// set_mode, >= 1.8.6 so it switches to protocol id 3, >= 2.3.0 so error 60 applies).
 pub const DEFAULT_FIRMWARE: &str = "v2.5.0";
-/// Longest serial number accepted (a box's field is 40 bytes for both, NUL separated).
+/// Longest serial number accepted (get_robot_sn's field is 40 bytes for both, NUL separated).
 pub const MAX_SN_LEN: usize = 16;
+/// Longest get_version text: its field is 40 bytes and the SDK reads it up to a NUL.
+pub const MAX_VERSION_TEXT: usize = 39;
 
 /// The firmware's joint speed limit, 180 deg/s (rad/s): servo_j targets that ask for more raise
 /// error 24, measured joint speeds above it error 30.
@@ -78,6 +80,8 @@ pub enum IdentityError {
     Serial(String),
     #[error("firmware version {0:?}: expected vMAJOR.MINOR.PATCH (numbers)")]
     Firmware(String),
+    #[error("version text {0:?} is longer than the box's {MAX_VERSION_TEXT} bytes: shorten the serial numbers")]
+    TooLong(String),
 }
 
 impl BoxIdentityConfig {
@@ -96,10 +100,14 @@ impl BoxIdentityConfig {
                 return Err(IdentityError::Serial(sn.clone()));
             }
         }
-        match parse_firmware(&self.firmware) {
-            Some(_) if self.firmware.len() <= 12 => Ok(()),
-            _ => Err(IdentityError::Firmware(self.firmware.clone())),
+        if parse_firmware(&self.firmware).is_none() {
+            return Err(IdentityError::Firmware(self.firmware.clone()));
         }
+        let text = self.version_text();
+        if text.len() > MAX_VERSION_TEXT {
+            return Err(IdentityError::TooLong(text));
+        }
+        Ok(())
     }
 
     /// The get_version text: `axis,type,arm_sn,box_sn,firmware` (xArm7, type 7).
@@ -203,7 +211,7 @@ impl ArmBox {
     ) -> Self {
         plant.reset(&initial_q);
         let mut version_text = identity.version_text();
-        version_text.truncate(40);
+        version_text.truncate(MAX_VERSION_TEXT);
         let checks_tcp_speed = identity.firmware_number().is_some_and(|v| v >= (2, 3, 0));
         Self {
             plant,

@@ -3,7 +3,9 @@
 Usage: python xarm_sdk_peer.py '<json args>'
 args: host, cmd_port, report ports (real, normal, rich, realtime), q0, q1 (start and goal of a
 servo_j stream, rad), limit_q (a servo target just beyond a joint limit), collide_q (a goal whose
-path hits the scene). The SDK is used with its defaults; only its port constants are set from the
+path hits the scene). After the collision: clean, motion_enable and set_mode(1) without
+set_state(0) (servo_j must not move the arm), set_state(0) (it moves again), a servo_j step too
+fast for the firmware (error 24), and recovery. The SDK is used with its defaults; only its port constants are set from the
 arguments (a no-op when the stub runs on the box's own ports). The last line printed is one JSON
 object with everything the Rust test checks.
 """
@@ -108,5 +110,59 @@ codes = stream(arm, start, args["collide_q"], args.get("collide_steps", 150))
 time.sleep(0.5)
 out["collision"] = {"servo_codes": sorted(set(codes)), "err_warn": arm.get_err_warn_code(),
                     "state": arm.get_state()[1], "report_error": arm.error_code}
+# The SDK's own joint-limit check follows the serial number: J4 at -0.15 rad is inside the first
+# arms' table but beyond a current arm's (-0.10472), so the SDK refuses it without sending (-8).
+probe = list(args["q1"])
+probe[3] = -0.15
+out["sdk_range_check"] = arm.set_servo_angle_j(probe, is_radian=True)
+
+
+def moved_from(q):
+    now = arm.get_servo_angle(is_radian=True)[1]
+    return max(abs(a - b) for a, b in zip(now[:7], q[:7]))
+
+
+# System reset: after the collision, clean the error, enable and set mode 1 but do not
+# set_state(0): the box stays stopped and servo_j moves nothing.
+seq = {}
+seq["clean_error"] = arm.clean_error()
+seq["state_after_clean"] = arm.get_state()[1]
+seq["motion_enable"] = arm.motion_enable(enable=True)
+seq["set_mode"] = arm.set_mode(1)
+time.sleep(0.3)
+seq["state_after_mode"] = arm.get_state()[1]
+here = arm.get_servo_angle(is_radian=True)[1][:7]
+away = list(here)
+away[0] -= 0.02  # joint 1 back, away from the wall
+seq["servo_without_state0"] = arm.set_servo_angle_j(away, is_radian=True)
+time.sleep(0.3)
+seq["moved_without_state0"] = moved_from(here)
+seq["set_state0"] = arm.set_state(0)
+time.sleep(0.1)
+seq["state_after_state0"] = arm.get_state()[1]
+seq["servo_after_state0"] = sorted(set(stream(arm, here, away, 20)))
+time.sleep(0.3)
+seq["moved_after_state0"] = moved_from(here)
+
+# A step the firmware refuses: 0.3 rad on joint 7 right after a setpoint (> 180 deg/s).
+cur = arm.get_servo_angle(is_radian=True)[1][:7]
+arm.set_servo_angle_j(cur, is_radian=True)
+jump = list(cur)
+jump[6] += 0.3
+seq["speed_servo_code"] = arm.set_servo_angle_j(jump, is_radian=True)
+time.sleep(0.4)
+seq["speed_err_warn"] = arm.get_err_warn_code()
+seq["speed_state"] = arm.get_state()[1]
+seq["speed_report_error"] = arm.error_code
+seq["speed_moved_j7"] = abs(arm.get_servo_angle(is_radian=True)[1][6] - cur[6])
+
+# Recovery: the SDK's enable sequence makes the arm ready again.
+seq["recover_codes"] = enable(arm)
+time.sleep(0.4)
+seq["recovered_state"] = arm.get_state()[1]
+seq["recovered_err_warn"] = arm.get_err_warn_code()
+seq["recovered_report_error"] = arm.error_code
+seq["recovered_servo"] = arm.set_servo_angle_j(cur, is_radian=True)
+out["reset_sequence"] = seq
 arm.disconnect()
 print(json.dumps(out))
