@@ -8,7 +8,7 @@ use hitl::control::setpoint::Setpoint;
 use hitl::control::stop::StopPlanner;
 use hitl::control::telemetry::{LoopStatus, NoTelemetry};
 use hitl::control::tick::{ControlLoop, Devices, Health, LoopIo, Outcome, Program};
-use hitl::devices::none::{NoCamera, NoInputs, NoLight};
+use hitl::devices::none::{NoCamera, NoInputs, NoLight, NoTrigger};
 use hitl::rt::probe;
 use hitl::rt::slot::LatestSlot;
 use hitl_hal::{Arm, ArmState, Clock, ErrorKind, ErrorType, Joints, MonotonicClock};
@@ -150,7 +150,7 @@ fn run(program: &Program, script: Script, operator_stop_at: Option<u64>) -> Ran 
     let clock = MonotonicClock::new();
     let (slot, reports) = LatestSlot::new();
     slot.publish(ArmState { received_ns: clock.now_ns(), q: START, ..Default::default() });
-    let arm =
+    let mut arm =
         FakeArm { sent: Vec::with_capacity(10_000), reports: slot, script, stopped: false, clock };
     let health = Health::default();
     let status = Arc::new(LoopStatus::default());
@@ -170,13 +170,19 @@ fn run(program: &Program, script: Script, operator_stop_at: Option<u64>) -> Ran 
             flag.store(true, Ordering::Relaxed);
         });
     }
-    let devices = Devices { arm, camera: NoCamera, light: NoLight, inputs: NoInputs };
+    let devices = Devices {
+        arm: &mut arm,
+        camera: NoCamera,
+        light: NoLight,
+        inputs: NoInputs,
+        trigger: NoTrigger,
+    };
     let io = LoopIo { reports, telemetry: NoTelemetry, status, health, stop, clock };
     let control = ControlLoop::new(program, devices, io, interlocks, RATE, &START);
     let before = RT_ALLOCATIONS.load(Ordering::Relaxed);
-    let (outcome, devices) = control.run(Duration::ZERO);
+    let outcome = control.run(Duration::ZERO);
     let allocations = RT_ALLOCATIONS.load(Ordering::Relaxed) - before;
-    Ran { outcome, sent: devices.arm.sent, stopped: devices.arm.stopped, allocations }
+    Ran { outcome, sent: arm.sent, stopped: arm.stopped, allocations }
 }
 
 static SERIAL: AtomicBool = AtomicBool::new(false);

@@ -49,3 +49,51 @@ pub trait ArmReports: ErrorType {
     /// Block until the next report arrives (or the reader's timeout passes).
     fn next_report(&mut self) -> Result<ArmState, Self::Error>;
 }
+
+impl<T: Arm + ?Sized> Arm for &mut T {
+    fn enable_servo(&mut self) -> Result<(), Self::Error> {
+        T::enable_servo(self)
+    }
+    fn servo_joint(&mut self, q: &Joints) -> Result<(), Self::Error> {
+        T::servo_joint(self, q)
+    }
+    fn stop(&mut self) -> Result<(), Self::Error> {
+        T::stop(self)
+    }
+    fn joint_positions(&mut self) -> Result<Joints, Self::Error> {
+        T::joint_positions(self)
+    }
+    fn codes(&mut self) -> Result<(u8, u8), Self::Error> {
+        T::codes(self)
+    }
+}
+
+impl<T: ArmReports + ?Sized> ArmReports for &mut T {
+    fn next_report(&mut self) -> Result<ArmState, Self::Error> {
+        T::next_report(self)
+    }
+}
+
+impl<T: Arm + ?Sized> Arm for Box<T> {
+    fn enable_servo(&mut self) -> Result<(), Self::Error> {
+        T::enable_servo(self)
+    }
+    fn servo_joint(&mut self, q: &Joints) -> Result<(), Self::Error> {
+        T::servo_joint(self, q)
+    }
+    fn stop(&mut self) -> Result<(), Self::Error> {
+        T::stop(self)
+    }
+    fn joint_positions(&mut self) -> Result<Joints, Self::Error> {
+        T::joint_positions(self)
+    }
+    fn codes(&mut self) -> Result<(u8, u8), Self::Error> {
+        T::codes(self)
+    }
+}
+
+impl<T: ArmReports + ?Sized> ArmReports for Box<T> {
+    fn next_report(&mut self) -> Result<ArmState, Self::Error> {
+        T::next_report(self)
+    }
+}

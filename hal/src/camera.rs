@@ -30,6 +30,16 @@ pub struct CaptureRequest {
     pub fired_ns: u64,
 }
 
+/// Where a frame's `exposure_ns` comes from.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum TimestampSource {
+    /// The exposure itself: the device's global timestamp (its exposure clock fitted to the
+    /// host's), or a simulated camera's exact capture time.
+    DeviceExposure,
+    /// The host's arrival time of the frame: later than the exposure by the transfer time.
+    HostArrival,
+}
+
 /// A frame delivered by a camera, matched to the capture that caused it.
 #[derive(Debug, Clone, PartialEq)]
 pub struct RgbdFrame {
@@ -39,6 +49,8 @@ pub struct RgbdFrame {
     pub device_ns: u64,
     /// Exposure time on the host's monotonic clock, nanoseconds (after clock mapping).
     pub exposure_ns: u64,
+    /// What `exposure_ns` was measured from: the exposure itself, or the frame's arrival.
+    pub timestamp: TimestampSource,
     pub intrinsics: Intrinsics,
     /// Colour, rgb8, row-major, `width * height * 3` bytes.
     pub color: Vec<u8>,
@@ -58,4 +70,34 @@ pub trait RgbdCamera: ErrorType {
     fn trigger(&mut self, request: CaptureRequest) -> Result<(), Self::Error>;
     /// Take a delivered frame if one is ready (never blocks).
     fn poll_frame(&mut self) -> Result<Option<RgbdFrame>, Self::Error>;
+}
+
+impl<T: RgbdCamera + ?Sized> RgbdCamera for &mut T {
+    fn configure(&mut self, config: &StreamConfig) -> Result<Intrinsics, Self::Error> {
+        T::configure(self, config)
+    }
+    fn arm_trigger(&mut self) -> Result<(), Self::Error> {
+        T::arm_trigger(self)
+    }
+    fn trigger(&mut self, request: CaptureRequest) -> Result<(), Self::Error> {
+        T::trigger(self, request)
+    }
+    fn poll_frame(&mut self) -> Result<Option<RgbdFrame>, Self::Error> {
+        T::poll_frame(self)
+    }
+}
+
+impl<T: RgbdCamera + ?Sized> RgbdCamera for Box<T> {
+    fn configure(&mut self, config: &StreamConfig) -> Result<Intrinsics, Self::Error> {
+        T::configure(self, config)
+    }
+    fn arm_trigger(&mut self) -> Result<(), Self::Error> {
+        T::arm_trigger(self)
+    }
+    fn trigger(&mut self, request: CaptureRequest) -> Result<(), Self::Error> {
+        T::trigger(self, request)
+    }
+    fn poll_frame(&mut self) -> Result<Option<RgbdFrame>, Self::Error> {
+        T::poll_frame(self)
+    }
 }

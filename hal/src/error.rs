@@ -66,3 +66,7 @@ pub trait ErrorType {
 impl<T: ErrorType + ?Sized> ErrorType for &mut T {
     type Error = T::Error;
 }
+
+impl<T: ErrorType + ?Sized> ErrorType for Box<T> {
+    type Error = T::Error;
+}

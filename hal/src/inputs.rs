@@ -13,3 +13,15 @@ pub struct InputState {
 pub trait Inputs: ErrorType {
     fn read(&mut self) -> Result<InputState, Self::Error>;
 }
+
+impl<T: Inputs + ?Sized> Inputs for &mut T {
+    fn read(&mut self) -> Result<InputState, Self::Error> {
+        T::read(self)
+    }
+}
+
+impl<T: Inputs + ?Sized> Inputs for Box<T> {
+    fn read(&mut self) -> Result<InputState, Self::Error> {
+        T::read(self)
+    }
+}

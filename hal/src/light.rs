@@ -15,3 +15,27 @@ pub trait Light: ErrorType {
         Err(ErrorKind::InvalidRequest.into())
     }
 }
+
+impl<T: Light + ?Sized> Light for &mut T {
+    fn set_level(&mut self, level: f32) -> Result<(), Self::Error> {
+        T::set_level(self, level)
+    }
+    fn strobe(&mut self, level: f32, duration_us: u32) -> Result<(), Self::Error>
+    where
+        Self::Error: From<ErrorKind>,
+    {
+        T::strobe(self, level, duration_us)
+    }
+}
+
+impl<T: Light + ?Sized> Light for Box<T> {
+    fn set_level(&mut self, level: f32) -> Result<(), Self::Error> {
+        T::set_level(self, level)
+    }
+    fn strobe(&mut self, level: f32, duration_us: u32) -> Result<(), Self::Error>
+    where
+        Self::Error: From<ErrorKind>,
+    {
+        T::strobe(self, level, duration_us)
+    }
+}

@@ -26,3 +26,21 @@ pub trait Trigger: ErrorType {
     /// Take an acknowledged fire if one arrived (never blocks).
     fn poll_fired(&mut self) -> Result<Option<FireReport>, Self::Error>;
 }
+
+impl<T: Trigger + ?Sized> Trigger for &mut T {
+    fn fire(&mut self, tick: u64, lines: TriggerLines) -> Result<(), Self::Error> {
+        T::fire(self, tick, lines)
+    }
+    fn poll_fired(&mut self) -> Result<Option<FireReport>, Self::Error> {
+        T::poll_fired(self)
+    }
+}
+
+impl<T: Trigger + ?Sized> Trigger for Box<T> {
+    fn fire(&mut self, tick: u64, lines: TriggerLines) -> Result<(), Self::Error> {
+        T::fire(self, tick, lines)
+    }
+    fn poll_fired(&mut self) -> Result<Option<FireReport>, Self::Error> {
+        T::poll_fired(self)
+    }
+}

@@ -5,9 +5,12 @@
 //! refuses when it cannot ask.
 
 use crate::cli::reregister::ReregisterArgs;
-use crate::control::session::{self, ArmTarget, RunRequest};
+use crate::control::session::{self, ArmTarget, RunRequest, StubFault};
+use crate::devices::CameraSpec;
 use crate::exit;
 use crate::rt::RtOptions;
+use hitl_drivers::light::LightSpec;
+use hitl_perception::BackendSpec;
 use hitl_record::{ChunkCompression, RecorderConfig};
 use hitl_trajectories::lab::LabConfig;
 use std::io::{BufRead, IsTerminal, Write};
@@ -40,14 +43,15 @@ pub struct RunArgs {
     pub config: Option<PathBuf>,
     /// Camera: sim (the stub's rendered camera), orbbec, or none.
     #[arg(long, default_value = "sim", value_name = "sim|orbbec|none")]
-    pub camera: String,
-    /// Light: sim, dmx:DEV (Enttec DMX USB Pro), trigger:DEV (trigger box), or none.
+    pub camera: CameraSpec,
+    /// Light: sim, dmx:DEV[,addr=N][,16bit] (Enttec DMX USB Pro), trigger:DEV (the trigger box:
+    /// light level, camera trigger line, e-stop and door inputs), or none.
     #[arg(long, default_value = "sim", value_name = "sim|dmx:DEV|trigger:DEV|none")]
-    pub light: String,
+    pub light: LightSpec,
     /// Pose estimation on captured frames: icp, onnx:MODEL, socket:PATH (an external estimator
     /// listening on a unix socket, docs/perception.md), or none.
     #[arg(long, default_value = "none", value_name = "icp|onnx:MODEL|socket:PATH|none")]
-    pub perception: String,
+    pub perception: BackendSpec,
     #[command(flatten)]
     pub reregister: ReregisterArgs,
     /// Simulated camera intrinsics: nfov, wfov (the paper's presets) or orbbec.
@@ -62,7 +66,7 @@ pub struct RunArgs {
     /// Inject a stub fault at a time into the run (repeatable): drop-connection, stall-reports,
     /// stall-replies, arm-error, deviation, estop, door-open; e.g. `--stub-fault estop@2.5`.
     #[arg(long = "stub-fault", value_name = "KIND@SECONDS")]
-    pub stub_faults: Vec<String>,
+    pub stub_faults: Vec<StubFault>,
     /// Do not ask for confirmation before moving a real arm (the enclosure is known to be clear).
     #[arg(long)]
     pub yes: bool,

@@ -2,6 +2,11 @@
 //! setpoint, send it, fire captures and light, hand out telemetry. Everything it reads was
 //! prepared before the loop ([`Program`]); it allocates nothing, takes no lock, awaits nothing
 //! and writes no log. Statistics leave through the telemetry sink and [`LoopStatus`].
+//!
+//! The loop borrows its devices ([`Devices`] of `&mut` references, which implement the hal
+//! traits like the devices themselves): the session opens, starts and stops them around it. Each
+//! tick asks every device for its health (hal's `Lifecycle::health`), so a device whose I/O task
+//! failed trips the run within one period even when the tick had nothing to ask it.
 
 use super::interlocks::{Device, Interlocks, Reaction, Sense, Trip, TripKind};
 use super::setpoint::{Phase, Setpoint};
@@ -9,8 +14,8 @@ use super::stop::{StopPlan, StopRequest, StopRequester};
 use super::telemetry::{CaptureOut, LoopStatus, SetpointOut, TelemetrySink, TimingOut};
 use crate::rt::{probe, slot::SlotReader, Periodic, Wake};
 use hitl_hal::{
-    Arm, ArmState, CaptureRequest, Clock, Error as _, ErrorKind, Inputs, Light, MonotonicClock,
-    RgbdCamera,
+    Arm, ArmState, CaptureRequest, Clock, Error as _, ErrorKind, Inputs, Lifecycle, Light,
+    MonotonicClock, RgbdCamera, Trigger, TriggerLines,
 };
 use std::sync::atomic::{AtomicBool, AtomicU8, Ordering};
 use std::sync::Arc;
@@ -78,11 +83,14 @@ impl Health {
 }
 
 /// The devices the loop drives; the loop does not know which implementations are behind them.
-pub struct Devices<A, C, L, I> {
+/// The session passes `&mut` borrows of the devices it owns.
+pub struct Devices<A, C, L, I, G> {
     pub arm: A,
     pub camera: C,
     pub light: L,
     pub inputs: I,
+    /// Hardware trigger lines (the trigger box): the camera line fires at every capture tick.
+    pub trigger: G,
 }
 
 /// How a run ended.
@@ -112,9 +120,9 @@ pub struct LoopIo<T> {
 }
 
 /// The loop and all the state it keeps between ticks.
-pub struct ControlLoop<'p, A, C, L, I, T> {
+pub struct ControlLoop<'p, A, C, L, I, G, T> {
     program: &'p Program,
-    devices: Devices<A, C, L, I>,
+    devices: Devices<A, C, L, I, G>,
     reports: SlotReader<ArmState>,
     telemetry: T,
     status: Arc<LoopStatus>,
@@ -132,18 +140,19 @@ pub struct ControlLoop<'p, A, C, L, I, T> {
     device_failed: Option<Device>,
 }
 
-impl<'p, A, C, L, I, T> ControlLoop<'p, A, C, L, I, T>
+impl<'p, A, C, L, I, G, T> ControlLoop<'p, A, C, L, I, G, T>
 where
     A: Arm,
-    C: RgbdCamera,
-    L: Light,
+    C: RgbdCamera + Lifecycle,
+    L: Light + Lifecycle,
     I: Inputs,
+    G: Trigger + Lifecycle,
     T: TelemetrySink,
 {
     /// A loop that starts from the arm at rest at `start`.
     pub fn new(
         program: &'p Program,
-        devices: Devices<A, C, L, I>,
+        devices: Devices<A, C, L, I, G>,
         io: LoopIo<T>,
         interlocks: Interlocks,
         rate_hz: f64,
@@ -171,8 +180,9 @@ where
     }
 
     /// Run on the calling thread until the program ends or a trip has been handled. The caller
-    /// has applied the OS real-time settings to this thread.
-    pub fn run(mut self, spin: Duration) -> (Outcome, Devices<A, C, L, I>) {
+    /// has applied the OS real-time settings to this thread; the devices go back to it with the
+    /// borrows when this returns.
+    pub fn run(mut self, spin: Duration) -> Outcome {
         let mut clock = Periodic::new(Duration::from_secs_f64(self.dt), spin);
         let outcome = {
             let _in_loop = probe::enter_rt_loop();
@@ -184,7 +194,7 @@ where
             }
         };
         self.status.done.store(true, Ordering::Release);
-        (outcome, self.devices)
+        outcome
     }
 
     /// One period of work.
@@ -204,6 +214,7 @@ where
                 Default::default()
             }
         };
+        self.check_device_health();
 
         // 2. Interlocks (the first trip wins; none are evaluated once stopping).
         if self.trip.is_none() {
@@ -277,6 +288,25 @@ where
         Flow::Continue
     }
 
+    /// Each device's own health (a fault its I/O task tripped), and the trigger lines'
+    /// acknowledgements taken off their queue.
+    fn check_device_health(&mut self) {
+        let d = &mut self.devices;
+        let failed = if d.light.health().is_err() {
+            Some(Device::Light)
+        } else if d.camera.health().is_err() {
+            Some(Device::Camera)
+        } else if d.trigger.health().is_err() {
+            Some(Device::Trigger)
+        } else {
+            None
+        };
+        if let Some(device) = failed {
+            self.device_failed.get_or_insert(device);
+        }
+        while let Ok(Some(_fired)) = self.devices.trigger.poll_fired() {}
+    }
+
     /// Approach, playback, settle or stop: which setpoint tick `k` sends, or the end of the run.
     fn next_setpoint(
         &mut self,
@@ -335,6 +365,9 @@ where
 
     /// Tell the arm to stop where it is (if it still hears us) and end the run.
     fn hold(&mut self, trip: Trip) -> Outcome {
+        // Send only: the arm's stop is a write that waits for no reply (XarmClient::stop), so the
+        // tick never blocks on a box that does not answer. Whether the box really stopped is the
+        // stop supervisor's job, after the loop and off this thread (control::stop_supervisor).
         let _ = self.devices.arm.stop();
         Outcome::Tripped { trip, stopped: false }
     }
@@ -371,6 +404,10 @@ where
         let Some(i) = k.checked_sub(first) else { return };
         if !p.capture.get(i as usize).copied().unwrap_or(false) {
             return;
+        }
+        let lines = TriggerLines { camera: true, light: false };
+        if self.devices.trigger.fire(k, lines).is_err() {
+            self.device_failed.get_or_insert(Device::Trigger);
         }
         match self.devices.camera.trigger(CaptureRequest { tick: k, fired_ns: now }) {
             Ok(()) => {}

@@ -1,9 +1,10 @@
-//! Devices that are deliberately absent (`--camera none`, `--light none`, no input wiring).
-//! They accept every call and do nothing, so the loop's code is the same with or without them.
+//! Devices that are deliberately absent (`--camera none`, `--light none`, no input wiring, no
+//! trigger lines). They accept every call and do nothing, so the loop's code is the same with or
+//! without them.
 
 use hitl_hal::{
-    CaptureRequest, ErrorKind, ErrorType, InputState, Inputs, Intrinsics, Light, RgbdCamera,
-    RgbdFrame, StreamConfig,
+    CaptureRequest, ErrorKind, ErrorType, FireReport, InputState, Inputs, Intrinsics, Lifecycle,
+    Light, RgbdCamera, RgbdFrame, StreamConfig, Trigger, TriggerLines,
 };
 
 /// No camera: triggers are accepted and no frame ever arrives.
@@ -13,6 +14,8 @@ pub struct NoCamera;
 impl ErrorType for NoCamera {
     type Error = ErrorKind;
 }
+
+impl Lifecycle for NoCamera {}
 
 impl RgbdCamera for NoCamera {
     fn configure(&mut self, config: &StreamConfig) -> Result<Intrinsics, ErrorKind> {
@@ -37,6 +40,8 @@ impl ErrorType for NoLight {
     type Error = ErrorKind;
 }
 
+impl Lifecycle for NoLight {}
+
 impl Light for NoLight {
     fn set_level(&mut self, _level: f32) -> Result<(), ErrorKind> {
         Ok(())
@@ -52,8 +57,29 @@ impl ErrorType for NoInputs {
     type Error = ErrorKind;
 }
 
+impl Lifecycle for NoInputs {}
+
 impl Inputs for NoInputs {
     fn read(&mut self) -> Result<InputState, ErrorKind> {
         Ok(InputState::default())
+    }
+}
+
+/// No trigger lines: the camera is triggered in software only.
+#[derive(Debug, Default, Clone, Copy)]
+pub struct NoTrigger;
+
+impl ErrorType for NoTrigger {
+    type Error = ErrorKind;
+}
+
+impl Lifecycle for NoTrigger {}
+
+impl Trigger for NoTrigger {
+    fn fire(&mut self, _tick: u64, _lines: TriggerLines) -> Result<(), ErrorKind> {
+        Ok(())
+    }
+    fn poll_fired(&mut self) -> Result<Option<FireReport>, ErrorKind> {
+        Ok(None)
     }
 }

@@ -7,17 +7,22 @@
 //!
 //! The tick only stores the level into a lock-free slot; a tokio task picks it up every
 //! `poll` period, writes a frame when the level changed (at most one per `min_interval`), and
-//! refreshes the universe every `refresh` period (DMX receivers expect a continuous stream). Write errors, write timeouts and
-//! hang-ups trip the sticky health flag, which the next call from the tick returns as an error.
+//! refreshes the universe every `refresh` period (DMX receivers expect a continuous stream). Write
+//! errors, write timeouts and hang-ups trip the sticky health flag, which the next call from the
+//! tick ([`Light::set_level`] or [`Lifecycle::health`]) returns as an error.
+//!
+//! The task runs on the run's tokio runtime for as long as the light is in use: the runtime must
+//! outlive the handle. [`Lifecycle::stop`] has the task write the current level one last time
+//! and close the port, and waits for it (the widget keeps sending its last frame after that).
 
-use std::sync::atomic::{AtomicU32, Ordering};
+use std::sync::atomic::{AtomicBool, AtomicU32, Ordering};
 use std::sync::Arc;
 use std::time::Duration;
 
-use hitl_hal::{ErrorKind, ErrorType, Light};
+use hitl_hal::{ErrorKind, ErrorType, Lifecycle, Light};
 use tokio::task::JoinHandle;
 
-use super::fault::{Fault, Health, SerialError};
+use super::fault::{Fault, Health, SerialError, TaskAlive, TaskEnd};
 use super::serial::{check_level, open_port, write_within};
 
 /// Start-of-message delimiter of the Enttec DMX USB Pro API.
@@ -158,6 +163,8 @@ struct Shared {
     health: Health,
     /// f32 bits of the latest level asked for by the tick.
     level: AtomicU32,
+    /// Asked to write a last frame and end.
+    stopping: AtomicBool,
 }
 
 /// A DMX512 light on an Enttec DMX USB Pro. Drop it to stop the refresh task (the widget then
@@ -165,6 +172,9 @@ struct Shared {
 pub struct DmxLight {
     shared: Arc<Shared>,
     task: JoinHandle<()>,
+    ended: TaskEnd,
+    /// How long `stop` waits for the last frame.
+    stop_timeout: Duration,
 }
 
 impl DmxLight {
@@ -173,14 +183,29 @@ impl DmxLight {
     pub async fn open(path: &str, config: DmxConfig) -> Result<Self, SerialError> {
         config.validate()?;
         let port = open_port(path, config.baud, "DMX light (Enttec DMX USB Pro)")?;
-        let shared = Arc::new(Shared { health: Health::new(), level: AtomicU32::new(0) });
-        let task = tokio::spawn(refresh_task(port, config, Arc::clone(&shared)));
-        Ok(Self { shared, task })
+        let shared = Arc::new(Shared {
+            health: Health::new(),
+            level: AtomicU32::new(0),
+            stopping: AtomicBool::new(false),
+        });
+        let (alive, ended) = TaskEnd::new();
+        let task = tokio::spawn(refresh_task(port, config, Arc::clone(&shared), alive));
+        let stop_timeout = config.write_timeout + config.refresh + config.poll;
+        Ok(Self { shared, task, ended, stop_timeout })
     }
 
     /// The fault the driver tripped on, if any.
     pub fn fault(&self) -> Option<Fault> {
         self.shared.health.fault()
+    }
+
+    /// Healthy, or the sticky fault; a task that ended unasked (its runtime was shut down) is the
+    /// fault [`Fault::TaskEnded`].
+    fn check(&self) -> Result<(), SerialError> {
+        if !self.shared.stopping.load(Ordering::Acquire) && self.ended.has_ended() {
+            self.shared.health.trip(Fault::TaskEnded);
+        }
+        self.shared.health.check()
     }
 }
 
@@ -194,9 +219,31 @@ impl ErrorType for DmxLight {
     type Error = SerialError;
 }
 
+impl Lifecycle for DmxLight {
+    /// A fault the refresh task tripped on (unplugged, write timeout, I/O error).
+    fn health(&mut self) -> Result<(), SerialError> {
+        self.check()
+    }
+
+    /// Write the current level once more, close the port and end the task (bounded by the
+    /// write timeout plus one refresh period).
+    fn stop(&mut self) -> Result<(), SerialError> {
+        self.shared.stopping.store(true, Ordering::Release);
+        if self.ended.wait(self.stop_timeout) {
+            Ok(())
+        } else {
+            self.task.abort();
+            Err(SerialError::new(
+                ErrorKind::Timeout,
+                "DMX light: the last frame was not written in time; the task was aborted",
+            ))
+        }
+    }
+}
+
 impl Light for DmxLight {
     fn set_level(&mut self, level: f32) -> Result<(), SerialError> {
-        self.shared.health.check()?;
+        self.check()?;
         check_level(level)?;
         self.shared.level.store(level.to_bits(), Ordering::Release);
         Ok(())
@@ -207,6 +254,7 @@ async fn refresh_task(
     mut port: tokio_serial::SerialStream,
     config: DmxConfig,
     shared: Arc<Shared>,
+    _alive: TaskAlive,
 ) {
     let mut buf = [0u8; MAX_MESSAGE];
     let mut poll = tokio::time::interval(config.poll);
@@ -215,15 +263,21 @@ async fn refresh_task(
     let mut last_write = tokio::time::Instant::now();
     loop {
         poll.tick().await;
+        let stopping = shared.stopping.load(Ordering::Acquire);
         let bits = shared.level.load(Ordering::Acquire);
         let since = last_write.elapsed();
-        let due = since >= config.refresh || (sent != Some(bits) && since >= config.min_interval);
+        let due = stopping
+            || since >= config.refresh
+            || (sent != Some(bits) && since >= config.min_interval);
         if sent.is_some() && !due {
             continue;
         }
         let n = encode_frame(f32::from_bits(bits), &config, &mut buf);
         if let Err(fault) = write_within(&mut port, &buf[..n], config.write_timeout).await {
             shared.health.trip(fault);
+            return;
+        }
+        if stopping {
             return;
         }
         sent = Some(bits);

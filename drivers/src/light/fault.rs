@@ -7,6 +7,8 @@
 use std::borrow::Cow;
 use std::fmt;
 use std::sync::atomic::{AtomicU8, Ordering};
+use std::sync::mpsc;
+use std::time::Duration;
 
 use hitl_hal::{Error, ErrorKind};
 
@@ -154,6 +156,32 @@ impl Health {
             None => Ok(()),
             Some(f) => Err(f.into()),
         }
+    }
+}
+
+/// The end of a driver's I/O task, as its handle sees it: the task holds the [`TaskEnd`] sender
+/// half and drops it when it returns (or is aborted), which wakes [`TaskEnd::wait`] at once.
+#[derive(Debug)]
+pub struct TaskEnd(mpsc::Receiver<()>);
+
+/// Held by the I/O task; dropping it says the task has ended.
+#[derive(Debug)]
+pub struct TaskAlive(#[allow(dead_code)] mpsc::SyncSender<()>);
+
+impl TaskEnd {
+    pub fn new() -> (TaskAlive, TaskEnd) {
+        let (tx, rx) = mpsc::sync_channel(1);
+        (TaskAlive(tx), TaskEnd(rx))
+    }
+
+    /// Whether the task has ended (never blocks, never allocates).
+    pub fn has_ended(&self) -> bool {
+        matches!(self.0.try_recv(), Err(mpsc::TryRecvError::Disconnected) | Ok(()))
+    }
+
+    /// Block (outside the runtime) until the task has ended; `false` when `timeout` passed first.
+    pub fn wait(&self, timeout: Duration) -> bool {
+        matches!(self.0.recv_timeout(timeout), Err(mpsc::RecvTimeoutError::Disconnected) | Ok(()))
     }
 }
 

@@ -4,12 +4,16 @@
 //! - [`trigger_box`]: the project's microcontroller trigger box ([`TriggerBox`]: camera trigger
 //!   and light strobe lines, light level, e-stop and door inputs), protocol in [`protocol`] and
 //!   docs/trigger-box-protocol.md;
-//! - [`spec`]: the `--light sim|dmx:DEV|trigger:DEV|none` choice ([`LightSpec`]);
+//! - [`spec`]: the `--light sim|dmx:DEV|trigger:DEV|none` choice ([`LightSpec`]) and the registry
+//!   that opens a serial light as trait objects ([`OpenedLight`]): a new kind of light is its
+//!   driver file plus its arms in `spec.rs`;
 //! - [`fault`]: the drivers' error type and sticky lock-free health flag;
 //! - [`open`]: [`SerialLight`], the serial light a [`LightSpec`] names, opened.
 //!
 //! Every driver here is a tick-side handle that only touches atomics and lock-free queues, plus a
-//! tokio task that owns the port. See docs/lights.md.
+//! tokio task that owns the port; the caller's runtime must outlive the handle (it is the run's
+//! runtime, kept for the whole run). Each driver implements [`hitl_hal::Lifecycle`]: `health`
+//! from the tick, `stop` after the loop. See docs/lights.md and docs/devices.md.
 
 pub mod dmx;
 pub mod fault;
@@ -22,7 +26,7 @@ pub mod trigger_box;
 pub use dmx::{DmxConfig, DmxLight, DmxResolution};
 pub use fault::{Fault, SerialError};
 pub use open::SerialLight;
-pub use spec::LightSpec;
+pub use spec::{InputsDriver, LightDriver, LightSpec, OpenedLight, TriggerDriver};
 pub use trigger_box::{TriggerBox, TriggerBoxConfig};
 
 #[cfg(test)]

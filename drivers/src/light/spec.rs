@@ -1,9 +1,17 @@
-//! `--light sim|dmx:DEV[,addr=N][,16bit]|trigger:DEV|none`: which light drives the Sun.
+//! `--light sim|dmx:DEV[,addr=N][,16bit]|trigger:DEV|none`: which light drives the Sun, and the
+//! registry of the serial lights: parsing a choice ([`LightSpec`]'s `FromStr`), naming it
+//! (`Display`) and opening it ([`LightSpec::open`]) are the one place a new kind of light is
+//! registered. The controller (src/devices) wraps whatever [`OpenedLight`] holds without naming
+//! any driver; `sim` and `none` are not drivers and are handled there.
 
 use std::fmt;
 use std::str::FromStr;
 
-use super::dmx::{DmxConfig, DmxResolution, UNIVERSE};
+use hitl_hal::{ErrorType, Inputs, Lifecycle, Light, MonotonicClock, Trigger};
+
+use super::dmx::{DmxConfig, DmxLight, DmxResolution, UNIVERSE};
+use super::fault::SerialError;
+use super::trigger_box::{TriggerBox, TriggerBoxConfig};
 
 /// The light chosen on the command line.
 #[derive(Debug, Clone, PartialEq)]
@@ -95,5 +103,53 @@ impl fmt::Display for LightSpec {
                 Ok(())
             }
         }
+    }
+}
+
+/// A light driver as the controller holds it: level, lifecycle, movable to the real-time thread.
+pub trait LightDriver: Light + Lifecycle + ErrorType<Error = SerialError> + Send {}
+impl<T: Light + Lifecycle + ErrorType<Error = SerialError> + Send> LightDriver for T {}
+
+/// Safety inputs a light device also reads (the trigger box's e-stop and door lines).
+pub trait InputsDriver: Inputs + Lifecycle + ErrorType<Error = SerialError> + Send {}
+impl<T: Inputs + Lifecycle + ErrorType<Error = SerialError> + Send> InputsDriver for T {}
+
+/// Trigger lines a light device also fires (the trigger box's camera and strobe lines).
+pub trait TriggerDriver: Trigger + Lifecycle + ErrorType<Error = SerialError> + Send {}
+impl<T: Trigger + Lifecycle + ErrorType<Error = SerialError> + Send> TriggerDriver for T {}
+
+/// A serial light, opened: the light itself, and the inputs and trigger lines the same device
+/// provides, if any.
+pub struct OpenedLight {
+    /// Names the device and its port, for messages ("DMX light on /dev/ttyUSB0").
+    pub name: String,
+    pub light: Box<dyn LightDriver>,
+    pub inputs: Option<Box<dyn InputsDriver>>,
+    pub trigger: Option<Box<dyn TriggerDriver>>,
+}
+
+impl LightSpec {
+    /// Open the serial light this names (`Ok(None)` for `sim` and `none`, which are not serial
+    /// drivers). Must run inside the tokio runtime that will carry the drivers' I/O tasks for the
+    /// whole run: the caller keeps that runtime alive until it has stopped the devices.
+    pub async fn open(&self, clock: MonotonicClock) -> Result<Option<OpenedLight>, SerialError> {
+        Ok(match self {
+            LightSpec::Sim | LightSpec::None => None,
+            LightSpec::Dmx { port, config } => Some(OpenedLight {
+                name: format!("DMX light on {port}"),
+                light: Box::new(DmxLight::open(port, *config).await?),
+                inputs: None,
+                trigger: None,
+            }),
+            LightSpec::Trigger { port } => {
+                let tb = TriggerBox::open(port, TriggerBoxConfig::default(), clock).await?;
+                Some(OpenedLight {
+                    name: format!("trigger box on {port}"),
+                    light: Box::new(tb.clone()),
+                    inputs: Some(Box::new(tb.clone())),
+                    trigger: Some(Box::new(tb)),
+                })
+            }
+        })
     }
 }

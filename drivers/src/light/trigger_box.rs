@@ -7,6 +7,9 @@
 //! report, and enforces the deadlines (acknowledgement, input staleness, write). Any fault
 //! (garbage, over-long line, unexpected ack, `E` line, timeout, hang-up) is sticky and returned by
 //! the next call from the tick.
+//!
+//! The task runs on the run's tokio runtime for as long as any clone is in use (the runtime must
+//! outlive the handles); [`Lifecycle::stop`] has it write what is queued, close the port and end.
 
 use std::collections::VecDeque;
 use std::sync::atomic::{AtomicBool, AtomicI64, AtomicU32, AtomicU64, AtomicU8, Ordering};
@@ -15,13 +18,13 @@ use std::time::Duration;
 
 use crossbeam_queue::ArrayQueue;
 use hitl_hal::{
-    Clock, ErrorKind, ErrorType, FireReport, InputState, Inputs, Light, MonotonicClock, Trigger,
-    TriggerLines,
+    Clock, ErrorKind, ErrorType, FireReport, InputState, Inputs, Lifecycle, Light, MonotonicClock,
+    Trigger, TriggerLines,
 };
 use tokio::io::AsyncReadExt;
 use tokio::task::JoinHandle;
 
-use super::fault::{Fault, Health, SerialError};
+use super::fault::{Fault, Health, SerialError, TaskAlive, TaskEnd};
 use super::protocol::{
     format_command, level_permille, parse_line, BoxLine, Command, LineBuffer, Pushed,
 };
@@ -80,6 +83,10 @@ struct Shared {
     offset_ns: AtomicI64,
     /// That round trip, ns (`u64::MAX`: no estimate yet).
     offset_rtt_ns: AtomicU64,
+    /// Asked to write what is queued and end.
+    stopping: AtomicBool,
+    /// The task has ended (set by its drop guard, also when it is aborted).
+    task_ended: AtomicBool,
 }
 
 impl Shared {
@@ -90,11 +97,26 @@ impl Shared {
     }
 }
 
-struct TaskGuard(JoinHandle<()>);
+struct TaskGuard {
+    task: JoinHandle<()>,
+    ended: std::sync::Mutex<TaskEnd>,
+}
 
 impl Drop for TaskGuard {
     fn drop(&mut self) {
-        self.0.abort();
+        self.task.abort();
+    }
+}
+
+/// Owned by the task: marks it ended however it ends.
+struct EndMark {
+    shared: Arc<Shared>,
+    _alive: TaskAlive,
+}
+
+impl Drop for EndMark {
+    fn drop(&mut self) {
+        self.shared.task_ended.store(true, Ordering::Release);
     }
 }
 
@@ -104,6 +126,7 @@ impl Drop for TaskGuard {
 pub struct TriggerBox {
     shared: Arc<Shared>,
     _task: Arc<TaskGuard>,
+    stop_timeout: Duration,
 }
 
 impl TriggerBox {
@@ -134,10 +157,18 @@ impl TriggerBox {
             ping_acked: AtomicBool::new(false),
             offset_ns: AtomicI64::new(0),
             offset_rtt_ns: AtomicU64::new(u64::MAX),
+            stopping: AtomicBool::new(false),
+            task_ended: AtomicBool::new(false),
         });
         let _ = shared.commands.push(Command::Ping);
-        let task = tokio::spawn(box_task(port, config, Arc::clone(&shared)));
-        let tb = Self { shared, _task: Arc::new(TaskGuard(task)) };
+        let (alive, ended) = TaskEnd::new();
+        let mark = EndMark { shared: Arc::clone(&shared), _alive: alive };
+        let task = tokio::spawn(box_task(port, config, Arc::clone(&shared), mark));
+        let tb = Self {
+            shared,
+            _task: Arc::new(TaskGuard { task, ended: std::sync::Mutex::new(ended) }),
+            stop_timeout: config.write_timeout * 4 + config.poll * 2,
+        };
         let deadline = tokio::time::Instant::now() + config.open_timeout;
         loop {
             if let Some(f) = tb.shared.health.fault() {
@@ -193,8 +224,19 @@ impl TriggerBox {
         self.shared.fired_dropped.load(Ordering::Relaxed)
     }
 
+    /// Healthy, or the sticky fault; a task that ended unasked (its runtime was shut down) is the
+    /// fault [`Fault::TaskEnded`].
+    fn check(&self) -> Result<(), SerialError> {
+        if self.shared.task_ended.load(Ordering::Acquire)
+            && !self.shared.stopping.load(Ordering::Acquire)
+        {
+            self.shared.health.trip(Fault::TaskEnded);
+        }
+        self.shared.health.check()
+    }
+
     fn queue(&self, cmd: Command) -> Result<(), SerialError> {
-        self.shared.health.check()?;
+        self.check()?;
         if self.shared.commands.push(cmd).is_err() {
             self.shared.health.trip(Fault::QueueFull);
             return Err(Fault::QueueFull.into());
@@ -205,6 +247,32 @@ impl TriggerBox {
 
 impl ErrorType for TriggerBox {
     type Error = SerialError;
+}
+
+impl Lifecycle for TriggerBox {
+    /// A fault the task tripped on: garbage, `E` line, missed ack, stale inputs, hang-up.
+    fn health(&mut self) -> Result<(), SerialError> {
+        self.check()
+    }
+
+    /// Write what is queued (a last level), close the port and end the task; every clone is
+    /// stopped with it.
+    fn stop(&mut self) -> Result<(), SerialError> {
+        self.shared.stopping.store(true, Ordering::Release);
+        let ended = match self._task.ended.lock() {
+            Ok(end) => end.wait(self.stop_timeout),
+            Err(_) => self.shared.task_ended.load(Ordering::Acquire),
+        };
+        if ended {
+            Ok(())
+        } else {
+            self._task.task.abort();
+            Err(SerialError::new(
+                ErrorKind::Timeout,
+                "trigger box: queued commands were not written in time; the task was aborted",
+            ))
+        }
+    }
 }
 
 impl Trigger for TriggerBox {
@@ -220,14 +288,14 @@ impl Trigger for TriggerBox {
         if let Some(r) = self.shared.fired.pop() {
             return Ok(Some(r));
         }
-        self.shared.health.check()?;
+        self.check()?;
         Ok(None)
     }
 }
 
 impl Inputs for TriggerBox {
     fn read(&mut self) -> Result<InputState, SerialError> {
-        self.shared.health.check()?;
+        self.check()?;
         if !self.shared.inputs_fresh(self.shared.clock.now_ns()) {
             self.shared.health.trip(Fault::InputsStale);
             return Err(Fault::InputsStale.into());
@@ -239,7 +307,7 @@ impl Inputs for TriggerBox {
 
 impl Light for TriggerBox {
     fn set_level(&mut self, level: f32) -> Result<(), SerialError> {
-        self.shared.health.check()?;
+        self.check()?;
         check_level(level)?;
         self.shared.level.store(u32::from(level_permille(level)), Ordering::Release);
         Ok(())
@@ -385,7 +453,12 @@ impl BoxTask {
     }
 }
 
-async fn box_task(port: tokio_serial::SerialStream, config: TriggerBoxConfig, shared: Arc<Shared>) {
+async fn box_task(
+    port: tokio_serial::SerialStream,
+    config: TriggerBoxConfig,
+    shared: Arc<Shared>,
+    _mark: EndMark,
+) {
     let (mut rd, mut wr) = tokio::io::split(port);
     let mut task = BoxTask {
         config,
@@ -422,7 +495,9 @@ async fn box_task(port: tokio_serial::SerialStream, config: TriggerBoxConfig, sh
                 if let Err(f) = res { break Err(f); }
             }
             _ = poll.tick() => {
+                let stopping = shared.stopping.load(Ordering::Acquire);
                 if let Err(f) = task.service(&mut wr).await { break Err(f); }
+                if stopping { break Ok(()); }
             }
         }
     };

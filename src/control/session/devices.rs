@@ -1,18 +1,12 @@
-//! The run's devices besides the arm (camera, light, inputs), the target scene the camera looks
-//! at, the recorder, and the frames still on their way after the loop.
+//! What the session keeps around the devices: the target scene the camera looks at, the
+//! recorder (with the run's choices in its metadata), and the frames still on their way after
+//! the loop. Opening the devices is `crate::devices`.
 
-#[cfg(feature = "stub")]
-use super::arm_link::EmbeddedStub;
 use super::{ArmTarget, RunError, RunRequest};
-#[cfg(feature = "stub")]
-use crate::capture::sim_light::SimLight;
 use crate::capture::sink::IntakeQueues;
-use crate::devices::any::{RunCamera, RunLight};
-use crate::devices::inputs::RunInputs;
-use crate::devices::none::{NoCamera, NoInputs, NoLight};
-use hitl_drivers::light::{LightSpec, SerialLight};
-use hitl_hal::MonotonicClock;
+use crate::devices::RunCamera;
 use hitl_hal::RgbdCamera as _;
+use hitl_perception::BackendSpec;
 use hitl_record::{
     Recorder, RecorderConfig, RecorderHandle, RunMetadata, SunPhaseTrack, Telemetry,
 };
@@ -49,98 +43,6 @@ pub(super) fn record_pose(m: &nalgebra::Matrix4<f64>) -> hitl_record::Pose {
     hitl_record::Pose::from_matrix(&rows)
 }
 
-/// The run's devices besides the arm, opened before anything moves.
-pub(super) struct RunDevices {
-    pub(super) camera: RunCamera,
-    pub(super) light: RunLight,
-    pub(super) inputs: RunInputs,
-}
-
-/// Open camera, light and inputs as asked; a device that cannot be opened fails the run (exit 5)
-/// before the arm is enabled.
-pub(super) fn open_devices(
-    req: &RunRequest,
-    #[cfg(feature = "stub")] stub: Option<&EmbeddedStub>,
-    clock: MonotonicClock,
-) -> Result<RunDevices, RunError> {
-    let spec: LightSpec =
-        req.light.parse().map_err(|e: hitl_drivers::light::spec::LightSpecError| {
-            RunError::BadInput(e.to_string())
-        })?;
-    #[cfg(feature = "stub")]
-    let sim_needed = |what: &str| -> Result<&EmbeddedStub, RunError> {
-        stub.ok_or_else(|| {
-            RunError::BadInput(format!("--{what} sim needs the embedded stub (no --arm)"))
-        })
-    };
-    let light = match &spec {
-        LightSpec::None => RunLight::None(NoLight),
-        #[cfg(feature = "stub")]
-        LightSpec::Sim => RunLight::Sim(SimLight(sim_needed("light")?.light.clone())),
-        #[cfg(not(feature = "stub"))]
-        LightSpec::Sim => {
-            return Err(RunError::BadInput("--light sim needs the stub feature".into()))
-        }
-        other => {
-            let rt = tokio::runtime::Builder::new_current_thread()
-                .enable_all()
-                .build()
-                .map_err(|e| RunError::Device(format!("light: {e}")))?;
-            let light = rt
-                .block_on(SerialLight::open(other, clock))
-                .map_err(|e| RunError::Device(format!("light {other}: {e}")))?;
-            match light {
-                Some(l) => RunLight::Serial(l),
-                None => RunLight::None(NoLight),
-            }
-        }
-    };
-    let camera = match req.camera.as_str() {
-        "none" => RunCamera::None(NoCamera),
-        #[cfg(feature = "stub")]
-        "sim" => {
-            use hitl_sim_stub::camera::{Preset, SimCamera, SimCameraConfig};
-            let s = sim_needed("camera")?;
-            let preset = Preset::from_name(&req.camera_preset).ok_or_else(|| {
-                RunError::BadInput(format!(
-                    "--camera-preset {}: expected nfov, wfov or orbbec",
-                    req.camera_preset
-                ))
-            })?;
-            let intrinsics = match req.camera_size {
-                Some((w, h)) => preset.at(w, h),
-                None => preset.intrinsics(),
-            };
-            let config = SimCameraConfig { intrinsics, clock, ..Default::default() };
-            let mut cam =
-                SimCamera::new(s.lab_model.clone(), s.arm.clone(), s.light.clone(), config)
-                    .map_err(|e| RunError::Device(e.to_string()))?;
-            cam.arm_trigger().map_err(|e| RunError::Device(e.to_string()))?;
-            RunCamera::Sim(Box::new(cam))
-        }
-        "orbbec" => {
-            use hitl_drivers::orbbec::{OrbbecCamera, OrbbecOptions};
-            let mut cam = OrbbecCamera::open(OrbbecOptions { clock, ..Default::default() })
-                .map_err(|e| RunError::Device(e.to_string()))?;
-            cam.arm_trigger().map_err(|e| RunError::Device(format!("Orbbec camera: {e}")))?;
-            RunCamera::Orbbec(Box::new(cam))
-        }
-        other => {
-            return Err(RunError::BadInput(format!(
-                "--camera {other}: expected sim, orbbec or none"
-            )))
-        }
-    };
-    #[cfg(feature = "stub")]
-    let inputs = match stub {
-        Some(s) => RunInputs::Sim(s.handle.inputs()),
-        None => RunInputs::None(NoInputs),
-    };
-    #[cfg(not(feature = "stub"))]
-    let inputs = RunInputs::None(NoInputs);
-    Ok(RunDevices { camera, light, inputs })
-}
-
 /// Start the recorder, when asked: the `run` metadata record first.
 pub(super) fn start_recorder(
     req: &RunRequest,
@@ -161,13 +63,19 @@ pub(super) fn start_recorder(
             "trajectory": req.trajectory.display().to_string(),
             "rate_hz": req.rate_hz,
             "speed_scale": req.speed_scale,
-            "camera": req.camera,
-            "light": req.light,
-            "perception": req.perception,
+            "camera": req.camera.to_string(),
+            "light": req.light.to_string(),
+            "perception": perception_name(&req.perception),
             "record_compression": req.record_compression.to_string(),
             "reregister": req.reregister,
             "target_model": req.target_model,
-            "arm": match &req.target { ArmTarget::Stub { faults } => format!("stub (faults: {faults:?})"), ArmTarget::Remote { host } => host.clone() },
+            "arm": match &req.target {
+                ArmTarget::Stub { faults } => format!(
+                    "stub (faults: {:?})",
+                    faults.iter().map(ToString::to_string).collect::<Vec<_>>()
+                ),
+                ArmTarget::Remote { host } => host.clone(),
+            },
         })
         .to_string(),
         trajectory_sha256: sha.iter().map(|b| format!("{b:02x}")).collect(),
@@ -195,6 +103,16 @@ pub(super) fn start_recorder(
         .map_err(|e| RunError::BadInput(format!("cannot record to {}: {e}", path.display())))
 }
 
+/// `--perception` as the operator wrote it.
+fn perception_name(spec: &BackendSpec) -> String {
+    match spec {
+        BackendSpec::None => "none".into(),
+        BackendSpec::Icp => "icp".into(),
+        BackendSpec::Onnx(p) => format!("onnx:{}", p.display()),
+        BackendSpec::Socket(p) => format!("socket:{}", p.display()),
+    }
+}
+
 /// After the loop: frames for the last captures may still be on their way; hand them to the
 /// intake (up to 2 s), so every capture is recorded or reported.
 pub(super) fn collect_late_frames(camera: &mut RunCamera, intake: &IntakeQueues, fired: u64) {
@@ -209,7 +127,7 @@ pub(super) fn collect_late_frames(camera: &mut RunCamera, intake: &IntakeQueues,
             }
             Ok(None) => {
                 let delivered = intake.frames_in.load(Ordering::Relaxed);
-                if matches!(camera, RunCamera::None(_)) || delivered >= fired {
+                if !camera.delivers_frames() || delivered >= fired {
                     break;
                 }
                 std::thread::sleep(Duration::from_millis(5));

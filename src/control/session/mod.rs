@@ -1,11 +1,18 @@
-//! A run from start to exit code: load and preflight, connect, open devices, enable, plan and
-//! check the approach, play on the real-time thread, settle, stop, close. Everything that
-//! allocates or blocks happens here, before or after the loop; the loop itself is [`super::tick`].
+//! A run from start to exit code. [`run`] reads top to bottom as the steps of a run: load and
+//! preflight; start the arm's side (the embedded stub); open and start the devices; start the
+//! capture path (recorder, perception, frame intake); connect the arm, identify it, enable it;
+//! plan the approach; play on the real-time thread; stop the devices; close the capture path and
+//! the recording. Everything that allocates or blocks happens here, before or after the loop;
+//! the loop itself is [`super::tick`], which borrows the devices this module owns.
 //!
 //! - [`prepare`]: load, time-parametrise and preflight; plan the approach by the same rules;
-//! - [`arm_link`]: the arm's address, report reader, first report, and the embedded stub;
-//! - [`devices`]: camera, light, inputs, the target scene, the recorder, late frames;
+//! - [`arm_link`]: the arm's address, identity, report reader, first report, the embedded stub;
+//! - [`devices`]: the target scene, the recorder, late frames (the devices themselves are opened
+//!   by `crate::devices`, which is the only place that names drivers);
 //! - [`operator`]: what Ctrl-C does.
+//!
+//! The run owns one tokio runtime for its whole life: the serial drivers' I/O tasks and the
+//! perception forwarder live on it, from opening until the devices are stopped after the loop.
 
 mod arm_link;
 mod devices;
@@ -19,33 +26,63 @@ use crate::control::interlocks::{Interlocks, Thresholds};
 use crate::control::motion::MoveLimits;
 use crate::control::setpoint::Setpoint;
 use crate::control::stop::StopPlanner;
+use crate::control::stop_supervisor::StopConfirmation;
 use crate::control::telemetry::LoopStatus;
 use crate::control::tick::{ControlLoop, Devices, Health, LoopIo, Outcome, Program};
+use crate::devices::{self as run_devices, CameraSpec, DeviceChoice, DeviceError, RunDevices};
 use crate::exit;
-use crate::rt::{self, slot::LatestSlot, RtOptions};
-#[cfg(feature = "stub")]
-use arm_link::start_stub;
+use crate::rt::{self, slot::LatestSlot, slot::SlotReader, RtOptions};
 use arm_link::{connect_reports, first_report, resolve, spawn_report_reader};
-use devices::{
-    collect_late_frames, open_devices, record_pose, start_recorder, target_scene, RunDevices,
-};
+#[cfg(feature = "stub")]
+use arm_link::{start_stub, EmbeddedStub};
+use devices::{collect_late_frames, record_pose, start_recorder, target_scene, TargetScene};
+use hitl_drivers::light::LightSpec;
 use hitl_drivers::xarm::{ClientConfig, ReportKind, ServoReplies, XarmClient};
-use hitl_hal::{Arm, Joints, MonotonicClock};
+use hitl_hal::{Arm, ArmState, Joints, MonotonicClock};
 use hitl_perception::{backend_from_spec, spawn_worker, BackendSpec, ReregisterPolicy};
-use hitl_record::{ChunkCompression, EventKind, PoseStamped, SafetyEventMsg};
+use hitl_record::{
+    ChunkCompression, EventKind, PoseStamped, RecorderHandle, SafetyEventMsg, Telemetry,
+};
 use hitl_trajectories::lab::LabConfig;
+use hitl_trajectories::timing::SetpointTable;
+use hitl_trajectories::Trajectory;
 use operator::install_ctrlc;
 use prepare::{plan_approach, prepare};
+use std::net::{IpAddr, SocketAddr};
 use std::path::PathBuf;
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::Arc;
 use std::time::Duration;
 
+/// A `--stub-fault KIND[:VALUE]@SECONDS`, parsed.
+#[cfg(feature = "stub")]
+pub type StubFault = hitl_sim_stub::Fault;
+
+/// A `--stub-fault` in a build without the embedded stub: never parses.
+#[cfg(not(feature = "stub"))]
+#[derive(Debug, Clone, PartialEq)]
+pub struct StubFault(std::convert::Infallible);
+
+#[cfg(not(feature = "stub"))]
+impl std::str::FromStr for StubFault {
+    type Err = String;
+    fn from_str(_: &str) -> Result<Self, String> {
+        Err("this build has no embedded stub to inject faults into".into())
+    }
+}
+
+#[cfg(not(feature = "stub"))]
+impl std::fmt::Display for StubFault {
+    fn fmt(&self, _: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        match self.0 {}
+    }
+}
+
 /// Which arm the run drives.
 #[derive(Debug, Clone)]
 pub enum ArmTarget {
-    /// The embedded MuJoCo stub on loopback, with faults to inject (`KIND@SECONDS`).
-    Stub { faults: Vec<String> },
+    /// The embedded MuJoCo stub on loopback, with faults to inject.
+    Stub { faults: Vec<StubFault> },
     /// A real xArm control box.
     Remote { host: String },
 }
@@ -61,9 +98,9 @@ pub struct RunRequest {
     pub record: Option<PathBuf>,
     /// Chunk compression of the recording.
     pub record_compression: ChunkCompression,
-    pub camera: String,
-    pub light: String,
-    pub perception: String,
+    pub camera: CameraSpec,
+    pub light: LightSpec,
+    pub perception: BackendSpec,
     /// When the perception backend re-registers beyond its first frame and a lost track.
     pub reregister: ReregisterPolicy,
     /// Simulated camera intrinsics preset (nfov, wfov, orbbec) and size.
@@ -84,6 +121,15 @@ pub enum RunError {
     Refused(String),
     #[error("{0}")]
     Device(String),
+}
+
+impl From<DeviceError> for RunError {
+    fn from(e: DeviceError) -> Self {
+        match e {
+            DeviceError::BadInput(m) => RunError::BadInput(m),
+            DeviceError::Failed(m) => RunError::Device(m),
+        }
+    }
 }
 
 impl RunError {
@@ -115,6 +161,10 @@ pub struct RunReport {
     pub estimates: u64,
     /// Why the recording could not be closed properly, if so.
     pub record_error: Option<String>,
+    /// Devices that failed during the run, each with its name and the driver's reason.
+    pub device_faults: Vec<String>,
+    /// After a trip: whether a report confirmed the box's stop (state 4).
+    pub box_stop: Option<StopConfirmation>,
 }
 
 impl RunReport {
@@ -153,6 +203,12 @@ impl RunReport {
                 self.estimates
             ));
         }
+        for fault in &self.device_faults {
+            s.push_str(&format!("\ndevice fault: {fault}"));
+        }
+        if let Some(stop) = &self.box_stop {
+            s.push_str(&format!("\n{}", stop.describe()));
+        }
         if let Some(path) = &self.recording {
             s.push_str(&format!("\nrecording: {}", path.display()));
         }
@@ -164,128 +220,323 @@ impl RunReport {
     }
 }
 
-/// Play `req` and say how it ended.
+/// Play `req` and say how it ended. Each line is one step of the run.
 pub fn run(req: RunRequest) -> Result<RunReport, RunError> {
     // Ctrl-C from the very start: during setup it stops the run at its first tick, with no motion.
     let operator_stop = Arc::new(AtomicBool::new(false));
     install_ctrlc(&operator_stop);
+
+    // 1. Before anything is opened: the trajectory, the target, the estimator choice.
     let (traj, table) = prepare(&req)?;
     let scene = target_scene(&req, &traj)?;
-    let backend: BackendSpec =
-        req.perception.parse().map_err(|e: hitl_perception::PerceptionError| {
-            RunError::BadInput(format!("--perception: {e}"))
-        })?;
-    if backend == BackendSpec::None && req.reregister != ReregisterPolicy::default() {
+    check_perception_choice(&req)?;
+    let clock = MonotonicClock::new();
+    let runtime = io_runtime()?;
+
+    // 2. The arm's side: the embedded stub, or the real box's address.
+    let target = start_arm_target(&req, &scene)?;
+
+    // 3. Devices besides the arm, opened, configured and started before the arm is enabled.
+    let mut devices = open_and_start_devices(&req, &target, runtime.handle(), clock)?;
+
+    // 4. The capture path: recorder, perception worker, frame intake.
+    let capture = CapturePath::start(&req, &traj, &scene, &runtime)?;
+
+    // 5. The arm: connect, identify and preflight against its joint table, read, enable.
+    let mut link = connect_arm(&req, &target, &traj, &table, clock)?;
+
+    // 6. The program: the approach from where the arm stands, then the trajectory.
+    let program = build_program(&link.first.q, &table, &link.lab)?;
+
+    // 7. Play it on the real-time thread (the loop borrows the arm and the devices).
+    let played =
+        play(&req, &program, &table, &mut link, &mut devices, &capture, operator_stop, clock)?;
+
+    // 7b. A tripped run: the box's stop repeated until a report shows it (off the loop thread).
+    let box_stop = arm_link::confirm_stop(
+        &mut link.arm,
+        &mut link.stop_reports,
+        &played.outcome,
+        clock,
+        capture.record.as_ref(),
+    );
+
+    // 8. After the loop: the report reader, the devices, the capture path, the stub.
+    link.close();
+    let device_faults = close_devices(&mut devices, &capture, played.captures);
+    let closed = capture.close(&runtime, &played.outcome, &device_faults);
+    #[cfg(feature = "stub")]
+    let stub_final_q = target.close();
+    #[cfg(not(feature = "stub"))]
+    let stub_final_q = None;
+
+    let mut report = report(&req, &program, played, closed, stub_final_q, device_faults);
+    report.box_stop = box_stop;
+    Ok(report)
+}
+
+/// `--reregister-*` only make sense with a pose estimator.
+fn check_perception_choice(req: &RunRequest) -> Result<(), RunError> {
+    if req.perception == BackendSpec::None && req.reregister != ReregisterPolicy::default() {
         return Err(RunError::BadInput(
             "--reregister-every and --reregister-residual-m need a pose estimator \
              (--perception icp|onnx:MODEL|socket:PATH)"
                 .into(),
         ));
     }
-    let clock = MonotonicClock::new();
+    Ok(())
+}
 
-    // The arm: the embedded stub, or the real box.
+/// The run's one tokio runtime, kept until the run returns: serial drivers' I/O tasks and the
+/// perception forwarder live on it.
+fn io_runtime() -> Result<tokio::runtime::Runtime, RunError> {
+    tokio::runtime::Builder::new_multi_thread()
+        .worker_threads(1)
+        .thread_name("hitl-io")
+        .enable_all()
+        .build()
+        .map_err(|e| RunError::Device(format!("async runtime: {e}")))
+}
+
+/// Where the arm is: the embedded stub (started here) or a real box.
+struct ArmTargetLink {
     #[cfg(feature = "stub")]
-    let stub = match &req.target {
-        ArmTarget::Stub { faults } => Some(start_stub(faults, &req.lab, &scene)?),
-        ArmTarget::Remote { .. } => None,
-    };
-    let (cmd_addr, report_host) = match &req.target {
+    stub: Option<EmbeddedStub>,
+    cmd_addr: SocketAddr,
+    report_host: IpAddr,
+}
+
+impl ArmTargetLink {
+    fn report_port(&self, kind: ReportKind) -> u16 {
         #[cfg(feature = "stub")]
-        ArmTarget::Stub { .. } => {
-            let addr = stub
-                .as_ref()
-                .map(|s| s.handle.cmd_addr())
-                .ok_or_else(|| RunError::Device("stub did not start".into()))?;
-            (addr, addr.ip())
-        }
-        #[cfg(not(feature = "stub"))]
-        ArmTarget::Stub { .. } => {
-            return Err(RunError::BadInput(
-                "this build has no embedded stub: pass --arm HOST".into(),
-            ))
-        }
-        ArmTarget::Remote { host } => {
-            let addr = resolve(host, hitl_drivers::xarm::COMMAND_PORT)?;
-            (addr, addr.ip())
-        }
-    };
-    let port_of = |kind: ReportKind| -> u16 {
-        #[cfg(feature = "stub")]
-        if let Some(s) = &stub {
+        if let Some(s) = &self.stub {
             return s.handle.report_addr(kind).map_or(kind.default_port(), |a| a.port());
         }
         kind.default_port()
-    };
+    }
 
-    // Devices, recorder and perception, all before the arm is enabled.
-    let devices = open_devices(
-        &req,
+    /// Shut the stub down; where its arm ended.
+    #[cfg(feature = "stub")]
+    fn close(self) -> Option<Joints> {
+        self.stub.map(|s| {
+            let q = s.handle.plant_joints();
+            s.handle.shutdown();
+            q
+        })
+    }
+}
+
+fn start_arm_target(req: &RunRequest, scene: &TargetScene) -> Result<ArmTargetLink, RunError> {
+    match &req.target {
         #[cfg(feature = "stub")]
-        stub.as_ref(),
+        ArmTarget::Stub { faults } => {
+            let faults: Vec<String> = faults.iter().map(ToString::to_string).collect();
+            let stub = start_stub(&faults, &req.lab, scene)?;
+            let cmd_addr = stub.handle.cmd_addr();
+            Ok(ArmTargetLink { cmd_addr, report_host: cmd_addr.ip(), stub: Some(stub) })
+        }
+        #[cfg(not(feature = "stub"))]
+        ArmTarget::Stub { .. } => {
+            let _ = scene;
+            Err(RunError::BadInput("this build has no embedded stub: pass --arm HOST".into()))
+        }
+        ArmTarget::Remote { host } => {
+            let cmd_addr = resolve(host, hitl_drivers::xarm::COMMAND_PORT)?;
+            Ok(ArmTargetLink {
+                cmd_addr,
+                report_host: cmd_addr.ip(),
+                #[cfg(feature = "stub")]
+                stub: None,
+            })
+        }
+    }
+}
+
+/// Open camera, light, inputs and trigger lines as asked, configure and arm the camera, and start
+/// them all: a device that cannot fails the run (exit 5, naming it) before the arm is enabled.
+fn open_and_start_devices(
+    req: &RunRequest,
+    target: &ArmTargetLink,
+    runtime: &tokio::runtime::Handle,
+    clock: MonotonicClock,
+) -> Result<RunDevices, RunError> {
+    let choice = DeviceChoice {
+        camera: req.camera,
+        light: req.light.clone(),
+        stream: run_devices::camera::stream_config(
+            req.camera,
+            &req.camera_preset,
+            req.camera_size,
+        )?,
+    };
+    let ctx = run_devices::OpenContext {
+        runtime,
         clock,
-    )?;
-    let runtime = tokio::runtime::Builder::new_multi_thread()
-        .worker_threads(1)
-        .enable_all()
-        .build()
-        .map_err(|e| RunError::Device(format!("async runtime: {e}")))?;
-    let recorder = start_recorder(&req, &traj, scene.scale)?;
-    let record_telemetry = recorder.as_ref().map(|(_, t)| t.clone());
-    let (perception, estimates) = match &backend {
-        BackendSpec::None => (None, None),
-        spec => {
-            let mesh =
-                scene.model.lab_mesh(scene.scale).map_err(|e| RunError::BadInput(e.to_string()))?;
-            let estimator = backend_from_spec(spec, &mesh)
-                .map_err(|e| RunError::BadInput(format!("--perception: {e}")))?;
-            match estimator {
-                None => (None, None),
-                Some(est) => {
-                    let _guard = runtime.enter();
-                    let (handle, mut results, _task) = spawn_worker(est, 4, 64, req.reregister);
-                    let sink = record_telemetry.clone();
-                    let forward = runtime.spawn(async move {
-                        let mut n = 0u64;
-                        while let Some(r) = results.recv().await {
-                            if let (Ok(est), Some(sink)) = (&r.estimate, &sink) {
-                                if let Some(m) = est.pose {
-                                    sink.push_pose_estimate(&PoseStamped {
-                                        capture_ns: r.timestamp_ns,
-                                        pose: record_pose(&m),
-                                    });
+        #[cfg(feature = "stub")]
+        sim: target.stub.as_ref().map(|s| run_devices::SimScene {
+            lab_model: &s.lab_model,
+            arm: &s.arm,
+            light: &s.light,
+            inputs: s.handle.inputs(),
+        }),
+    };
+    #[cfg(not(feature = "stub"))]
+    let _ = target;
+    let mut devices = run_devices::open_devices(&choice, &ctx)?;
+    devices.start(&choice.stream)?;
+    Ok(devices)
+}
+
+/// Recorder, perception worker and frame intake: where telemetry and frames go.
+struct CapturePath {
+    recorder: Option<RecorderHandle>,
+    record: Option<Telemetry>,
+    perception: Option<hitl_perception::WorkerHandle>,
+    estimates: Option<tokio::task::JoinHandle<u64>>,
+    intake: Intake,
+    queues: Arc<IntakeQueues>,
+}
+
+/// What closing the capture path gave.
+struct ClosedCapture {
+    intake: IntakeStats,
+    estimates: u64,
+    record_summary: Option<Result<(), String>>,
+}
+
+impl CapturePath {
+    fn start(
+        req: &RunRequest,
+        traj: &Trajectory,
+        scene: &TargetScene,
+        runtime: &tokio::runtime::Runtime,
+    ) -> Result<Self, RunError> {
+        let recorder = start_recorder(req, traj, scene.scale)?;
+        let (recorder, record) = match recorder {
+            Some((h, t)) => (Some(h), Some(t)),
+            None => (None, None),
+        };
+        let (perception, estimates) = match &req.perception {
+            BackendSpec::None => (None, None),
+            spec => {
+                let mesh = scene
+                    .model
+                    .lab_mesh(scene.scale)
+                    .map_err(|e| RunError::BadInput(e.to_string()))?;
+                let estimator = backend_from_spec(spec, &mesh)
+                    .map_err(|e| RunError::BadInput(format!("--perception: {e}")))?;
+                match estimator {
+                    None => (None, None),
+                    Some(est) => {
+                        let _guard = runtime.enter();
+                        let (handle, mut results, _task) = spawn_worker(est, 4, 64, req.reregister);
+                        let sink = record.clone();
+                        let forward = runtime.spawn(async move {
+                            let mut n = 0u64;
+                            while let Some(r) = results.recv().await {
+                                if let (Ok(est), Some(sink)) = (&r.estimate, &sink) {
+                                    if let Some(m) = est.pose {
+                                        sink.push_pose_estimate(&PoseStamped {
+                                            capture_ns: r.timestamp_ns,
+                                            pose: record_pose(&m),
+                                        });
+                                    }
                                 }
+                                n += 1;
                             }
-                            n += 1;
-                        }
-                        n
-                    });
-                    (Some(handle), Some(forward))
+                            n
+                        });
+                        (Some(handle), Some(forward))
+                    }
                 }
             }
-        }
-    };
-    let intake_queues = Arc::new(IntakeQueues::new());
-    let intake = Intake::spawn(
-        Arc::clone(&intake_queues),
-        LabFrames::new(&req.lab),
-        IntakeOutputs { record: record_telemetry.clone(), perception: perception.clone() },
-    )
-    .map_err(|e| RunError::Device(format!("capture intake thread: {e}")))?;
+        };
+        let queues = Arc::new(IntakeQueues::new());
+        let intake = Intake::spawn(
+            Arc::clone(&queues),
+            LabFrames::new(&req.lab),
+            IntakeOutputs { record: record.clone(), perception: perception.clone() },
+        )
+        .map_err(|e| RunError::Device(format!("capture intake thread: {e}")))?;
+        Ok(Self { recorder, record, perception, estimates, intake, queues })
+    }
 
-    // Connect and enable the arm.
+    /// Drain the intake, let perception finish, write the run's last event and close the file.
+    fn close(
+        self,
+        runtime: &tokio::runtime::Runtime,
+        outcome: &Outcome,
+        device_faults: &[String],
+    ) -> ClosedCapture {
+        let intake = self.intake.finish();
+        if let Some(p) = &self.perception {
+            p.close();
+        }
+        let estimates = self.estimates.and_then(|f| runtime.block_on(f).ok()).unwrap_or(0);
+        if let (Outcome::Tripped { trip, stopped }, Some(t)) = (outcome, &self.record) {
+            let mut detail = format!("{}: {}", trip.kind.name(), trip.kind.detail());
+            if !device_faults.is_empty() {
+                detail.push_str(&format!(" ({})", device_faults.join("; ")));
+            }
+            t.push_event(SafetyEventMsg::text(
+                trip.t_ns,
+                if *stopped { EventKind::StopDone } else { EventKind::Other },
+                format!(
+                    "{detail}; {}",
+                    if *stopped { "controlled stop completed" } else { "arm told to hold" }
+                ),
+            ));
+        }
+        let record_summary =
+            self.recorder.map(|handle| handle.finish().map(|_| ()).map_err(|e| e.to_string()));
+        ClosedCapture { intake, estimates, record_summary }
+    }
+}
+
+/// The arm, connected and enabled, with its report stream.
+struct ArmLink {
+    arm: XarmClient,
+    reports: Option<SlotReader<ArmState>>,
+    reader_stop: Arc<AtomicBool>,
+    reader_thread: Option<std::thread::JoinHandle<()>>,
+    first: ArmState,
+    /// The lab as this arm allows it (its joint table).
+    lab: LabConfig,
+    /// A second view of the reports, for the stop supervisor after the loop.
+    stop_reports: SlotReader<ArmState>,
+}
+
+impl ArmLink {
+    /// Stop the report reader.
+    fn close(&mut self) {
+        self.reader_stop.store(true, Ordering::Release);
+        if let Some(t) = self.reader_thread.take() {
+            let _ = t.join();
+        }
+    }
+}
+
+fn connect_arm(
+    req: &RunRequest,
+    target: &ArmTargetLink,
+    traj: &Trajectory,
+    table: &SetpointTable,
+    clock: MonotonicClock,
+) -> Result<ArmLink, RunError> {
     let thresholds = Thresholds::from_lab(&req.lab);
     let replies =
         ServoReplies::Pipelined { max_outstanding: thresholds.unanswered_setpoints(table.rate_hz) };
+    let cmd_addr = target.cmd_addr;
     let mut arm = XarmClient::connect(
         cmd_addr,
         ClientConfig { servo_replies: replies, ..ClientConfig::default() },
     )
     .map_err(|e| RunError::Device(format!("arm at {cmd_addr}: {e}")))?;
+    let arm_lab = arm_link::identify_and_check(&mut arm, &req.lab, traj, table)?;
     let reader = connect_reports(
-        report_host,
-        port_of(ReportKind::Real),
-        Some(port_of(ReportKind::Normal)),
+        target.report_host,
+        target.report_port(ReportKind::Real),
+        Some(target.report_port(ReportKind::Normal)),
         clock,
     )?;
     let (slot, mut reports) = LatestSlot::new();
@@ -296,28 +547,65 @@ pub fn run(req: RunRequest) -> Result<RunReport, RunError> {
     let first = first_report(&mut reports, Duration::from_secs(2))
         .ok_or_else(|| RunError::Device("the arm sent no report within 2 s".into()))?;
     arm.enable_servo().map_err(|e| RunError::Device(format!("enabling the arm: {e}")))?;
-    let approach = plan_approach(&first.q, &table, &req.lab)?;
-    let program = Program {
+    Ok(ArmLink {
+        arm,
+        stop_reports: reports.tap(),
+        reports: Some(reports),
+        reader_stop,
+        reader_thread: Some(reader_thread),
+        first,
+        lab: arm_lab,
+    })
+}
+
+/// The approach from `start`, then the trajectory with its captures and light schedule.
+fn build_program(
+    start: &Joints,
+    table: &SetpointTable,
+    lab: &LabConfig,
+) -> Result<Program, RunError> {
+    let approach = plan_approach(start, table, lab)?;
+    let mut capture = vec![false; table.ticks()];
+    for c in &table.captures {
+        capture[c.tick] = true;
+    }
+    Ok(Program {
         playback: (0..table.ticks())
             .map(|k| Setpoint { q: table.q[k], qd: table.qd[k], qdd: table.qdd[k] })
             .collect(),
-        capture: {
-            let mut flags = vec![false; table.ticks()];
-            for c in &table.captures {
-                flags[c.tick] = true;
-            }
-            flags
-        },
+        capture,
         light: table.light.clone().unwrap_or_default(),
         light_lead_ticks: 0,
         settle_tolerance_rad: 0.002,
         settle_max_ticks: (2.0 * table.rate_hz) as u64,
         approach,
-    };
+    })
+}
 
+/// What the loop left.
+struct Played {
+    outcome: Outcome,
+    rt: rt::RtReport,
+    status: Arc<LoopStatus>,
+    captures: u64,
+}
+
+/// Play `program` on the real-time thread, the loop borrowing the arm and the devices; progress
+/// is followed on this thread.
+#[allow(clippy::too_many_arguments)]
+fn play(
+    req: &RunRequest,
+    program: &Program,
+    table: &SetpointTable,
+    link: &mut ArmLink,
+    devices: &mut RunDevices,
+    capture: &CapturePath,
+    operator_stop: Arc<AtomicBool>,
+    clock: MonotonicClock,
+) -> Result<Played, RunError> {
     let health = Health {
         operator_stop,
-        recorder: recorder.as_ref().map(|(h, _)| h.health()),
+        recorder: capture.recorder.as_ref().map(|h| h.health()),
         ..Health::default()
     };
     let status = Arc::new(LoopStatus::default());
@@ -329,39 +617,40 @@ pub fn run(req: RunRequest) -> Result<RunReport, RunError> {
     };
     let (planner, stop) = StopPlanner::start(stop_limits, table.dt, 10.0)
         .map_err(|e| RunError::Device(format!("stop planner thread: {e}")))?;
-    let interlocks = Interlocks::new(thresholds);
+    let reports =
+        link.reports.take().ok_or_else(|| RunError::Device("arm reports already taken".into()))?;
     let io = LoopIo {
         reports,
         telemetry: RunTelemetry {
-            record: record_telemetry.clone(),
-            intake: Arc::clone(&intake_queues),
+            record: capture.record.clone(),
+            intake: Arc::clone(&capture.queues),
         },
         status: Arc::clone(&status),
         health,
         stop,
         clock,
     };
-    let RunDevices { camera, light, inputs } = devices;
-    let late_frames = Arc::clone(&intake_queues);
+    let interlocks = Interlocks::new(Thresholds::from_lab(&req.lab));
     let rt_options = req.rt;
     let rate = table.rate_hz;
-    let start_q = first.q;
-    let status_rt = Arc::clone(&status);
+    let start_q = link.first.q;
+    let arm = &mut link.arm;
     let (outcome, rt_report) = std::thread::scope(|scope| {
-        let program = &program;
         let rt_thread = std::thread::Builder::new()
             .name("hitl-rt".into())
             .spawn_scoped(scope, move || {
                 let rt_report = rt::os::apply(&rt_options);
-                let devices = Devices { arm, camera, light, inputs };
-                let control = ControlLoop::new(program, devices, io, interlocks, rate, &start_q);
-                let (outcome, mut devices) = control.run(rt_options.spin);
-                let _ = devices.arm.flush_servo_replies();
-                collect_late_frames(
-                    &mut devices.camera,
-                    &late_frames,
-                    status_rt.captures.load(Ordering::Acquire),
-                );
+                let loop_devices = Devices {
+                    arm: &mut *arm,
+                    camera: &mut devices.camera,
+                    light: &mut devices.light,
+                    inputs: &mut devices.inputs,
+                    trigger: &mut devices.trigger,
+                };
+                let control =
+                    ControlLoop::new(program, loop_devices, io, interlocks, rate, &start_q);
+                let outcome = control.run(rt_options.spin);
+                let _ = arm.flush_servo_replies();
                 (outcome, rt_report)
             })
             .map_err(|e| RunError::Device(format!("real-time thread: {e}")))?;
@@ -369,63 +658,55 @@ pub fn run(req: RunRequest) -> Result<RunReport, RunError> {
         rt_thread.join().map_err(|_| RunError::Device("the real-time thread panicked".into()))
     })?;
     drop(planner);
-    reader_stop.store(true, Ordering::Release);
-    let _ = reader_thread.join();
+    let captures = status.captures.load(Ordering::Acquire);
+    Ok(Played { outcome, rt: rt_report, status, captures })
+}
 
-    // Let the last frames arrive, then close the capture path and the recording.
-    std::thread::sleep(Duration::from_millis(300));
-    let intake_stats = intake.finish();
-    if let Some(p) = &perception {
-        p.close();
+/// After the loop: hand the frames still on their way to the intake, stop every device (a last
+/// light frame, the trigger box's queue written, ports closed), and say which devices failed.
+fn close_devices(devices: &mut RunDevices, capture: &CapturePath, captures: u64) -> Vec<String> {
+    collect_late_frames(&mut devices.camera, &capture.queues, captures);
+    let faults = devices.faults();
+    for failed in devices.stop() {
+        crate::errln!("note: {failed}");
     }
-    let estimates_forwarded = estimates.and_then(|f| runtime.block_on(f).ok()).unwrap_or(0);
-    if let (Outcome::Tripped { trip, stopped }, Some(t)) = (&outcome, &record_telemetry) {
-        t.push_event(SafetyEventMsg::text(
-            trip.t_ns,
-            if *stopped { EventKind::StopDone } else { EventKind::Other },
-            format!(
-                "{}: {}; {}",
-                trip.kind.name(),
-                trip.kind.detail(),
-                if *stopped { "controlled stop completed" } else { "arm told to hold" }
-            ),
-        ));
-    }
-    let record_summary = recorder.map(|(handle, _)| handle.finish().map_err(|e| e.to_string()));
+    faults
+}
 
-    #[cfg(feature = "stub")]
-    let stub_final_q = stub.map(|s| {
-        let q = s.handle.plant_joints();
-        s.handle.shutdown();
-        q
-    });
-    #[cfg(not(feature = "stub"))]
-    let stub_final_q = None;
-
-    let mut exit_code = match outcome {
+fn report(
+    req: &RunRequest,
+    program: &Program,
+    played: Played,
+    closed: ClosedCapture,
+    stub_final_q: Option<Joints>,
+    device_faults: Vec<String>,
+) -> RunReport {
+    let mut exit_code = match played.outcome {
         Outcome::Completed { .. } => exit::OK,
         Outcome::Tripped { trip, .. } => trip.kind.exit_code(),
     };
-    let recording_failed = matches!(record_summary, Some(Err(_)));
+    let recording_failed = matches!(closed.record_summary, Some(Err(_)));
     if exit_code == exit::OK && recording_failed {
         exit_code = exit::INTERLOCK;
     }
-    for line in &rt_report.fallbacks {
+    for line in &played.rt.fallbacks {
         crate::errln!("note: {line}");
     }
-    Ok(RunReport {
-        outcome,
+    RunReport {
+        outcome: played.outcome,
         exit_code,
         approach_ticks: program.approach.len(),
         playback_ticks: program.playback.len(),
-        captures: status.captures.load(Ordering::Relaxed),
-        max_late_ns: status.max_late_ns.load(Ordering::Relaxed),
-        overruns: status.overruns.load(Ordering::Relaxed),
-        rt: rt_report,
+        captures: played.captures,
+        max_late_ns: played.status.max_late_ns.load(Ordering::Relaxed),
+        overruns: played.status.overruns.load(Ordering::Relaxed),
+        rt: played.rt,
         stub_final_q,
         recording: req.record.clone(),
-        intake: intake_stats,
-        estimates: estimates_forwarded,
-        record_error: record_summary.and_then(|r| r.err()),
-    })
+        intake: closed.intake,
+        estimates: closed.estimates,
+        record_error: closed.record_summary.and_then(|r| r.err()),
+        device_faults,
+        box_stop: None,
+    }
 }

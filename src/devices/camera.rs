@@ -1,0 +1,134 @@
+//! `--camera sim|orbbec|none`: the choice, the stream the run asks of the camera, and the one
+//! place a camera kind is opened (a new kind is its driver plus one variant and one arm here).
+
+use super::any::{Kinds, RunCamera, Unmanaged};
+use super::none::NoCamera;
+use super::{DeviceError, OpenContext};
+use hitl_hal::{Intrinsics, StreamConfig};
+use std::fmt;
+use std::str::FromStr;
+
+/// The camera chosen on the command line.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum CameraSpec {
+    /// The stub's ray-cast RGB-D camera (needs the embedded stub).
+    Sim,
+    /// An Orbbec RGB-D camera through the Orbbec SDK.
+    Orbbec,
+    /// No camera: captures are recorded as fired and no frame comes.
+    None,
+}
+
+/// Why a `--camera` value was refused.
+#[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
+#[error("--camera {0:?}: expected sim, orbbec or none")]
+pub struct CameraSpecError(pub String);
+
+impl FromStr for CameraSpec {
+    type Err = CameraSpecError;
+    fn from_str(s: &str) -> Result<Self, Self::Err> {
+        match s {
+            "sim" => Ok(CameraSpec::Sim),
+            "orbbec" => Ok(CameraSpec::Orbbec),
+            "none" => Ok(CameraSpec::None),
+            other => Err(CameraSpecError(other.to_string())),
+        }
+    }
+}
+
+impl fmt::Display for CameraSpec {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        f.write_str(match self {
+            CameraSpec::Sim => "sim",
+            CameraSpec::Orbbec => "orbbec",
+            CameraSpec::None => "none",
+        })
+    }
+}
+
+/// The Orbbec Gemini-class stream (1280x800, f = 640 px), for builds without the stub's presets.
+#[cfg(not(feature = "stub"))]
+const ORBBEC_STREAM: Intrinsics =
+    Intrinsics { width: 1280, height: 800, fx: 640.0, fy: 640.0, cx: 640.0, cy: 400.0 };
+
+/// The stream the run asks of `spec`: the `--camera-preset` intrinsics (scaled to
+/// `--camera-size`), and a target mask where the camera can give one (only the simulated one).
+pub fn stream_config(
+    spec: CameraSpec,
+    preset: &str,
+    size: Option<(u32, u32)>,
+) -> Result<StreamConfig, DeviceError> {
+    let intrinsics = preset_intrinsics(preset, size)?;
+    Ok(StreamConfig { intrinsics, mask: spec == CameraSpec::Sim })
+}
+
+#[cfg(feature = "stub")]
+fn preset_intrinsics(preset: &str, size: Option<(u32, u32)>) -> Result<Intrinsics, DeviceError> {
+    use hitl_sim_stub::camera::Preset;
+    let p = Preset::from_name(preset).ok_or_else(|| {
+        DeviceError::BadInput(format!("--camera-preset {preset}: expected nfov, wfov or orbbec"))
+    })?;
+    Ok(match size {
+        Some((w, h)) => p.at(w, h),
+        None => p.intrinsics(),
+    })
+}
+
+#[cfg(not(feature = "stub"))]
+fn preset_intrinsics(preset: &str, size: Option<(u32, u32)>) -> Result<Intrinsics, DeviceError> {
+    if preset != "orbbec" || size.is_some() {
+        return Err(DeviceError::BadInput(
+            "--camera-preset and --camera-size need the stub feature (the presets live there)"
+                .into(),
+        ));
+    }
+    Ok(ORBBEC_STREAM)
+}
+
+/// Open the camera `spec` names (not yet configured: the session configures and arms it).
+pub fn open_camera(
+    spec: CameraSpec,
+    stream: &StreamConfig,
+    ctx: &OpenContext<'_>,
+) -> Result<RunCamera, DeviceError> {
+    let _ = stream;
+    Ok(match spec {
+        CameraSpec::None => RunCamera {
+            dev: Box::new(Kinds::new(NoCamera)),
+            name: "no camera".into(),
+            delivers_frames: false,
+        },
+        #[cfg(feature = "stub")]
+        CameraSpec::Sim => {
+            use hitl_sim_stub::camera::{SimCamera, SimCameraConfig};
+            let sim = ctx.sim_needed("camera")?;
+            let config = SimCameraConfig {
+                intrinsics: stream.intrinsics,
+                clock: ctx.clock,
+                ..Default::default()
+            };
+            let cam =
+                SimCamera::new(sim.lab_model.clone(), sim.arm.clone(), sim.light.clone(), config)
+                    .map_err(|e| DeviceError::Failed(format!("simulated camera: {e}")))?;
+            RunCamera {
+                dev: Box::new(Kinds::new(Unmanaged(cam))),
+                name: "simulated camera".into(),
+                delivers_frames: true,
+            }
+        }
+        #[cfg(not(feature = "stub"))]
+        CameraSpec::Sim => {
+            return Err(DeviceError::BadInput("--camera sim needs the stub feature".into()))
+        }
+        CameraSpec::Orbbec => {
+            use hitl_drivers::orbbec::{OrbbecCamera, OrbbecOptions};
+            let cam = OrbbecCamera::open(OrbbecOptions { clock: ctx.clock, ..Default::default() })
+                .map_err(|e| DeviceError::Failed(format!("Orbbec camera: {e}")))?;
+            RunCamera {
+                dev: Box::new(Kinds::new(Unmanaged(cam))),
+                name: "Orbbec camera".into(),
+                delivers_frames: true,
+            }
+        }
+    })
+}

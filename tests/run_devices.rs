@@ -1,0 +1,355 @@
+//! `hitl run` end to end with the serial devices: a pseudo-terminal peer plays the Enttec DMX
+//! widget or the trigger box (protocol v1, docs/trigger-box-protocol.md) while the binary drives
+//! the embedded stub. The levels the peer receives follow the trajectory's light schedule, the
+//! trigger box fires at the capture ticks, and every device fault (peer gone, door, e-stop,
+//! input silence, `E` line) ends the run with its reaction, exit code and `/safety/event`, the
+//! recording readable. Runs are serialised: each one drives a real-time loop and a physics thread.
+
+mod common;
+#[path = "../drivers/tests/light_pty/mod.rs"]
+mod light_pty;
+
+use common::SHARED_VM_LAB;
+use hitl_record::reader::{read_recording, Recording};
+use hitl_record::Phase;
+use hitl_trajectories::timing::SetpointTable;
+use hitl_trajectories::{npz, Trajectory};
+use light_pty::PtyPeer;
+use std::path::{Path, PathBuf};
+use std::process::{Command, Output, Stdio};
+use std::sync::atomic::{AtomicBool, Ordering};
+use std::sync::{Arc, Mutex};
+use std::time::{Duration, Instant};
+
+static ONE_AT_A_TIME: Mutex<()> = Mutex::new(());
+
+/// The stub's power-up pose (no approach).
+const HOME: [f64; 7] = [0.0, -0.5, 0.0, 0.9, 0.0, 1.4, 0.0];
+
+/// The light schedule: 0.2 for the first second, 0.6 for the second, 1.0 after.
+fn level_at(t: f64) -> f32 {
+    if t < 1.0 {
+        0.2
+    } else if t < 2.0 {
+        0.6
+    } else {
+        1.0
+    }
+}
+
+/// A 3 s sweep of joint 1 with captures at 0, 1, 2 and 3 s and the stepped light schedule.
+fn trajectory(dir: &Path) -> PathBuf {
+    let n = 31;
+    let t: Vec<f64> = (0..n).map(|i| i as f64 * 0.1).collect();
+    let qpos = t
+        .iter()
+        .map(|&t| {
+            let mut q = HOME;
+            q[0] = -0.3 * (std::f64::consts::PI * t / 3.0).sin().powi(2);
+            q
+        })
+        .collect();
+    let traj = Trajectory {
+        qpos,
+        capture: Some((0..n).map(|i| i % 10 == 0).collect()),
+        light: Some(t.iter().map(|&t| level_at(t)).collect()),
+        t,
+        ..Default::default()
+    };
+    let path = dir.join("lit.npz");
+    npz::save(&path, &traj, false).expect("write the trajectory");
+    path
+}
+
+struct Run {
+    out: Output,
+    rec: Recording,
+    traj: PathBuf,
+    _dir: tempfile::TempDir,
+}
+
+impl Run {
+    fn code(&self) -> i32 {
+        self.out.status.code().unwrap_or(-1)
+    }
+    fn text(&self) -> String {
+        format!(
+            "{}{}",
+            String::from_utf8_lossy(&self.out.stdout),
+            String::from_utf8_lossy(&self.out.stderr)
+        )
+    }
+    fn has_event(&self, kind: &str) -> bool {
+        self.rec.events.iter().any(|e| e.kind == kind)
+    }
+    fn stop_setpoints(&self) -> usize {
+        self.rec.setpoints.iter().filter(|s| s.phase == Phase::Stop).count()
+    }
+    /// Tick numbers of the playback captures, as the loop counts them.
+    fn capture_ticks(&self) -> Vec<u64> {
+        let traj = npz::load(&self.traj).expect("load").trajectory;
+        let table = SetpointTable::build(&traj, 250.0, 1.0).expect("table");
+        let approach =
+            self.rec.setpoints.iter().filter(|s| s.phase == Phase::Approach).count() as u64;
+        table.captures.iter().map(|c| approach + c.tick as u64).collect()
+    }
+}
+
+/// Plays the test trajectory with `--light LIGHT` while `peer` runs on its own thread until the
+/// run ends (it is told through the flag); returns the run and what the peer returned.
+fn run_with_peer<T: Send + 'static>(
+    light: &str,
+    peer: impl FnOnce(Arc<AtomicBool>) -> T + Send + 'static,
+) -> (Run, T) {
+    let dir = tempfile::tempdir().expect("tempdir");
+    let traj = trajectory(dir.path());
+    let mcap = dir.path().join("run.mcap");
+    let done = Arc::new(AtomicBool::new(false));
+    let peer_done = Arc::clone(&done);
+    let peer = std::thread::spawn(move || peer(peer_done));
+    let out = Command::new(env!("CARGO_BIN_EXE_hitl"))
+        .args(["run", traj.to_str().expect("utf-8"), "--record"])
+        .arg(&mcap)
+        .args(["--camera", "none", "--light", light, "--plain", "--config", SHARED_VM_LAB])
+        .stdin(Stdio::null())
+        .output()
+        .expect("run hitl");
+    done.store(true, Ordering::Release);
+    let got = peer.join().expect("the peer thread");
+    let rec = read_recording(&mcap).unwrap_or_else(|e| {
+        panic!(
+            "the recording stays readable: {e}\n{}{}",
+            String::from_utf8_lossy(&out.stdout),
+            String::from_utf8_lossy(&out.stderr)
+        )
+    });
+    (Run { out, rec, traj, _dir: dir }, got)
+}
+
+// ---------------------------------------------------------------------------------------------
+// DMX: the peer decodes Enttec label-6 messages.
+
+/// Channel 1 of every DMX frame received, with its arrival time.
+fn decode_dmx(pending: &mut Vec<u8>, at: Instant, out: &mut Vec<(Instant, u8)>) {
+    loop {
+        // Resynchronise on the start byte; anything before it is not a message.
+        match pending.iter().position(|&b| b == 0x7E) {
+            Some(0) => {}
+            Some(i) => {
+                pending.drain(..i);
+            }
+            None => {
+                pending.clear();
+                return;
+            }
+        }
+        if pending.len() < 4 {
+            return;
+        }
+        assert_eq!(pending[1], 6, "label 6 (Output Only Send DMX Packet Request)");
+        let len = usize::from(pending[2]) | usize::from(pending[3]) << 8;
+        assert!((25..=513).contains(&len), "data length {len}");
+        if pending.len() < 4 + len + 1 {
+            return;
+        }
+        assert_eq!(pending[4], 0, "DMX start code 0");
+        assert_eq!(pending[4 + len], 0xE7, "end byte");
+        out.push((at, pending[5]));
+        pending.drain(..4 + len + 1);
+    }
+}
+
+/// Plays the widget: decodes frames until the run ends, or until channel 1 has shown
+/// `close_at` (then it closes its end: the adapter is unplugged).
+fn dmx_peer(peer: PtyPeer, close_at: Option<u8>, done: Arc<AtomicBool>) -> Vec<(Instant, u8)> {
+    let mut peer = peer;
+    let mut frames = Vec::new();
+    let mut pending = Vec::new();
+    while !done.load(Ordering::Acquire) {
+        let bytes = peer.read_some(1, Duration::from_millis(10));
+        pending.extend_from_slice(&bytes);
+        decode_dmx(&mut pending, Instant::now(), &mut frames);
+        if close_at.is_some_and(|v| frames.iter().any(|f| f.1 == v)) {
+            drop(peer);
+            return frames;
+        }
+    }
+    frames
+}
+
+/// Channel-1 values in the order they changed.
+fn changes(frames: &[(Instant, u8)]) -> Vec<u8> {
+    let mut out: Vec<u8> = Vec::new();
+    for &(_, v) in frames {
+        if out.last() != Some(&v) {
+            out.push(v);
+        }
+    }
+    out
+}
+
+#[test]
+fn dmx_levels_follow_the_light_schedule() {
+    let _one = ONE_AT_A_TIME.lock().unwrap_or_else(|e| e.into_inner());
+    let peer = PtyPeer::new();
+    let light = format!("dmx:{}", peer.path);
+    let (run, frames) = run_with_peer(&light, move |done| dmx_peer(peer, None, done));
+    assert_eq!(run.code(), 0, "{}", run.text());
+    // Dark from opening, then 0.2, 0.6 and 1.0 of 255, rounded: 51, 153, 255.
+    assert_eq!(changes(&frames), vec![0, 51, 153, 255], "{}", run.text());
+    // The 0.6 step lasts the schedule's second (at 250 Hz, within DMX's 25 ms refresh).
+    let first = |v: u8| frames.iter().find(|f| f.1 == v).map(|f| f.0).expect("level seen");
+    let held = first(255).duration_since(first(153)).as_secs_f64();
+    assert!((0.85..=1.15).contains(&held), "0.6 held for {held} s");
+    // The widget keeps receiving frames for the whole run (the refresh task did not die).
+    let span = frames.last().expect("frames").0.duration_since(frames[0].0).as_secs_f64();
+    assert!(frames.len() as f64 >= span / 0.05, "{} frames in {span} s", frames.len());
+    let levels: Vec<f32> = run.rec.lights.iter().map(|l| l.level).collect();
+    assert_eq!(levels, vec![0.2, 0.6, 1.0], "recorded light levels");
+}
+
+#[test]
+fn a_dmx_widget_that_goes_away_stops_the_run_with_exit_5() {
+    let _one = ONE_AT_A_TIME.lock().unwrap_or_else(|e| e.into_inner());
+    let peer = PtyPeer::new();
+    let light = format!("dmx:{}", peer.path);
+    let (run, frames) = run_with_peer(&light, move |done| dmx_peer(peer, Some(153), done));
+    assert!(frames.iter().any(|f| f.1 == 153), "the peer saw the 0.6 step");
+    assert_eq!(run.code(), 5, "{}", run.text());
+    assert!(run.has_event("device-fault"), "{:?}", run.rec.events);
+    assert!(
+        run.rec
+            .events
+            .iter()
+            .any(|e| e.detail.contains("the light failed") && e.detail.contains("DMX light on")),
+        "an event names the light: {:?}",
+        run.rec.events
+    );
+    assert!(run.stop_setpoints() > 0, "a controlled stop: {}", run.text());
+    assert!(run.text().contains("controlled stop completed"), "{}", run.text());
+    let last = run.rec.setpoints.last().expect("setpoints");
+    assert!(last.qd.iter().all(|v| v.abs() < 1e-9), "the stop ends at rest");
+    assert!(run.rec.end.as_ref().is_some_and(|e| e.complete), "the file has its footer");
+}
+
+// ---------------------------------------------------------------------------------------------
+// The trigger box: the peer speaks protocol v1.
+
+/// What the box does once the level has reached 0.6 (one second into playback).
+#[derive(Debug, Clone, Copy, PartialEq)]
+enum Then {
+    Nothing,
+    OpenDoor,
+    PressEStop,
+    FallSilent,
+    SendError,
+}
+
+/// What the box received.
+#[derive(Debug, Default)]
+struct BoxLog {
+    levels: Vec<u16>,
+    fires: Vec<(u64, u8)>,
+}
+
+fn box_peer(mut peer: PtyPeer, then: Then, done: Arc<AtomicBool>) -> BoxLog {
+    let start = Instant::now();
+    let us = || start.elapsed().as_micros() as u64;
+    let mut log = BoxLog::default();
+    let (mut estop, mut door, mut silent, mut acted) = (false, false, false, false);
+    let mut line = Vec::new();
+    let mut last_inputs: Option<Instant> = None;
+    while !done.load(Ordering::Acquire) {
+        for b in peer.read_some(1, Duration::from_millis(5)) {
+            if b != b'\n' {
+                line.push(b);
+                continue;
+            }
+            let text = String::from_utf8(std::mem::take(&mut line)).expect("ASCII from the host");
+            let f: Vec<&str> = text.split(' ').collect();
+            assert!(text.len() < 64, "line within 64 bytes: {text:?}");
+            match f[0] {
+                "P" | "S" => {}
+                "L" => log.levels.push(f[2].parse().expect("permille")),
+                "F" => log.fires.push((f[2].parse().expect("tick"), f[3].parse().expect("mask"))),
+                other => panic!("unknown command {other:?} in {text:?}"),
+            }
+            peer.write(format!("A {} {}\n", f[1], us()).as_bytes());
+        }
+        if !acted && log.levels.contains(&600) {
+            acted = true;
+            match then {
+                Then::Nothing => {}
+                Then::OpenDoor => door = true,
+                Then::PressEStop => estop = true,
+                Then::FallSilent => silent = true,
+                Then::SendError => peer.write(b"E 0 4\n"),
+            }
+            last_inputs = None;
+        }
+        // Inputs every 20 ms (the protocol's limit is 50 ms), and at once on a change.
+        if !silent && last_inputs.is_none_or(|t| t.elapsed() >= Duration::from_millis(20)) {
+            peer.write(format!("I {} {} {}\n", us(), u8::from(estop), u8::from(door)).as_bytes());
+            last_inputs = Some(Instant::now());
+        }
+    }
+    log
+}
+
+fn box_run(then: Then) -> (Run, BoxLog) {
+    let peer = PtyPeer::new();
+    let light = format!("trigger:{}", peer.path);
+    run_with_peer(&light, move |done| box_peer(peer, then, done))
+}
+
+#[test]
+fn the_trigger_box_follows_the_light_schedule_and_fires_at_the_capture_ticks() {
+    let _one = ONE_AT_A_TIME.lock().unwrap_or_else(|e| e.into_inner());
+    let (run, log) = box_run(Then::Nothing);
+    assert_eq!(run.code(), 0, "{}", run.text());
+    assert_eq!(log.levels, vec![200, 600, 1000], "L lines");
+    let fired: Vec<u64> = log.fires.iter().map(|f| f.0).collect();
+    assert_eq!(fired, run.capture_ticks(), "F lines at the capture ticks");
+    assert!(log.fires.iter().all(|f| f.1 == 1), "the camera line only: {:?}", log.fires);
+    assert!(run.rec.events.is_empty(), "{:?}", run.rec.events);
+}
+
+#[test]
+fn the_door_opening_on_the_trigger_box_stops_the_run_with_exit_4() {
+    let _one = ONE_AT_A_TIME.lock().unwrap_or_else(|e| e.into_inner());
+    let (run, _) = box_run(Then::OpenDoor);
+    assert_eq!(run.code(), 4, "{}", run.text());
+    assert!(run.has_event("door-open"), "{:?}", run.rec.events);
+    assert!(run.stop_setpoints() > 0, "a controlled stop: {}", run.text());
+    assert!(run.text().contains("controlled stop completed"), "{}", run.text());
+}
+
+#[test]
+fn the_estop_on_the_trigger_box_holds_with_exit_4() {
+    let _one = ONE_AT_A_TIME.lock().unwrap_or_else(|e| e.into_inner());
+    let (run, _) = box_run(Then::PressEStop);
+    assert_eq!(run.code(), 4, "{}", run.text());
+    assert!(run.has_event("e-stop"), "{:?}", run.rec.events);
+    assert_eq!(run.stop_setpoints(), 0, "a hold sends no stop trajectory");
+    assert!(run.text().contains("arm told to hold"), "{}", run.text());
+}
+
+#[test]
+fn a_trigger_box_that_stops_reporting_its_inputs_is_a_device_fault_with_exit_5() {
+    let _one = ONE_AT_A_TIME.lock().unwrap_or_else(|e| e.into_inner());
+    let (run, _) = box_run(Then::FallSilent);
+    assert_eq!(run.code(), 5, "{}", run.text());
+    assert!(run.has_event("device-fault"), "{:?}", run.rec.events);
+    assert!(run.text().contains("input reports (e-stop, door) are stale"), "{}", run.text());
+    assert!(run.stop_setpoints() > 0, "a controlled stop: {}", run.text());
+}
+
+#[test]
+fn an_error_line_from_the_trigger_box_is_a_device_fault_with_exit_5() {
+    let _one = ONE_AT_A_TIME.lock().unwrap_or_else(|e| e.into_inner());
+    let (run, _) = box_run(Then::SendError);
+    assert_eq!(run.code(), 5, "{}", run.text());
+    assert!(run.has_event("device-fault"), "{:?}", run.rec.events);
+    assert!(run.text().contains("trigger box reported an error"), "{}", run.text());
+    assert!(run.stop_setpoints() > 0, "a controlled stop: {}", run.text());
+}
