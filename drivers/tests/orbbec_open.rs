@@ -3,7 +3,7 @@
 
 use std::path::PathBuf;
 
-use hitl_drivers::orbbec::{OrbbecCamera, OrbbecOptions};
+use hitl_drivers::orbbec::{probe, OrbbecCamera, OrbbecOptions};
 use hitl_hal::{Error, ErrorKind};
 
 fn sdk_library() -> PathBuf {
@@ -52,4 +52,13 @@ fn a_file_that_is_not_the_sdk_is_not_found_and_named() {
     assert_eq!(e.kind(), ErrorKind::NotFound, "{e}");
     assert!(e.to_string().contains("cannot load the Orbbec SDK library"), "{e}");
     assert!(e.to_string().contains(&fake.display().to_string()), "{e}");
+}
+
+#[test]
+fn probe_with_no_camera_lists_nothing_and_a_missing_library_is_not_found() {
+    let cameras = probe(&sdk_library()).expect("the real SDK loads and lists devices");
+    assert_eq!(cameras, vec![], "this machine has no Orbbec camera");
+    let e = probe(std::path::Path::new("/nonexistent/hitl/libOrbbecSDK.so")).expect_err("missing");
+    assert_eq!(e.kind(), ErrorKind::NotFound, "{e}");
+    assert!(e.to_string().contains("/nonexistent/hitl/libOrbbecSDK.so"), "{e}");
 }

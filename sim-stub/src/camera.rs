@@ -26,7 +26,7 @@ use crossbeam::atomic::AtomicCell;
 use crossbeam::channel::{self, Receiver, Sender, TryRecvError, TrySendError};
 use hitl_hal::{
     CaptureRequest, Clock, ErrorKind, ErrorType, Intrinsics, Joints, MonotonicClock, RgbdCamera,
-    RgbdFrame, StreamConfig,
+    RgbdFrame, StreamConfig, TimestampSource,
 };
 use nalgebra::Isometry3;
 use std::sync::atomic::{AtomicU64, Ordering};
@@ -298,6 +298,7 @@ impl Worker {
             request,
             device_ns: (sample.sim_time_s.max(0.0) * 1e9) as u64,
             exposure_ns,
+            timestamp: TimestampSource::DeviceExposure,
             intrinsics: image.intrinsics,
             color: image.color,
             depth_m: image.depth_m,

@@ -29,7 +29,8 @@ opaque!(
     ObConfig,
     ObStreamProfile,
     ObStreamProfileList,
-    ObFrame
+    ObFrame,
+    ObFilter
 );
 
 type Err = *mut *mut ObError;
@@ -46,8 +47,27 @@ pub struct ObCameraIntrinsic {
     pub height: i16,
 }
 
-/// `ob_multi_device_sync_config` (ObTypes.h).
+/// `ob_camera_distortion` (ObTypes.h; no padding, so `repr(C)` matches the packed header).
 #[repr(C)]
+#[derive(Debug, Clone, Copy, Default)]
+pub struct ObCameraDistortion {
+    pub k: [f32; 6],
+    pub p1: f32,
+    pub p2: f32,
+    pub model: c_int,
+}
+
+/// `ob_extrinsic`: `p_target = rot * p_source + trans`, rotation row-major, translation in mm.
+#[repr(C)]
+#[derive(Debug, Clone, Copy, Default)]
+pub struct ObExtrinsic {
+    pub rot: [f32; 9],
+    pub trans: [f32; 3],
+}
+
+/// `ob_multi_device_sync_config` (ObTypes.h). The header is under `#pragma pack(push, 1)`: the
+/// `bool` is followed directly by the next `int` (25 bytes in all), hence `packed`.
+#[repr(C, packed)]
 #[derive(Debug, Clone, Copy, Default)]
 pub struct ObMultiDeviceSyncConfig {
     pub sync_mode: c_int,
@@ -62,12 +82,26 @@ pub struct ObMultiDeviceSyncConfig {
 // Enumerators from ObTypes.h.
 pub const OB_SENSOR_COLOR: c_int = 2;
 pub const OB_SENSOR_DEPTH: c_int = 3;
-pub const OB_FORMAT_Y16: c_int = 8;
-pub const OB_FORMAT_RGB: c_int = 22;
-pub const OB_FPS_ANY: c_int = 0;
-pub const ALIGN_D2C_SW_MODE: c_int = 2;
 pub const OB_FRAME_AGGREGATE_OUTPUT_ALL_TYPE_FRAME_REQUIRE: c_int = 0;
+pub const OB_STREAM_COLOR: c_int = 2;
+// Only for frames built without a camera (the tests against the real library).
+#[cfg(test)]
+pub const OB_STREAM_DEPTH: c_int = 3;
+#[cfg(test)]
+pub const OB_FRAME_COLOR: c_int = 2;
+#[cfg(test)]
+pub const OB_FRAME_DEPTH: c_int = 3;
+#[cfg(test)]
+pub const OB_DISTORTION_NONE: c_int = 0;
 pub const OB_MULTI_DEVICE_SYNC_MODE_SOFTWARE_TRIGGERING: c_int = 1 << 5;
+pub const OB_MULTI_DEVICE_SYNC_MODE_HARDWARE_TRIGGERING: c_int = 1 << 6;
+pub const OB_PERMISSION_WRITE: c_int = 2;
+/// `OB_PROP_INTRA_CAMERA_SYNC_REFERENCE_INT` (Property.h), values `ob_intra_camera_sync_reference`.
+pub const OB_PROP_INTRA_CAMERA_SYNC_REFERENCE_INT: c_int = 236;
+/// `OB_MIDDLE_OF_EXPOSURE`: colour and depth synchronised on the middle of their exposures.
+pub const OB_MIDDLE_OF_EXPOSURE: i32 = 1;
+/// `OB_PROP_USB_SYNC_VOLTAGE_LEVEL_INT` (Property.h): the USB-C sync pins' I/O voltage level.
+pub const OB_PROP_USB_SYNC_VOLTAGE_LEVEL_INT: c_int = 270;
 pub const OB_CLOCK_TYPE_MONOTONIC: c_int = 1;
 pub const OB_LOG_SEVERITY_WARN: c_int = 2;
 pub const OB_LOG_SEVERITY_OFF: c_int = 5;
@@ -81,7 +115,9 @@ pub const OB_EXCEPTION_TYPE_UNSUPPORTED_OPERATION: c_int = 9;
 macro_rules! api {
     ($($name:ident: fn($($arg:ty),*) $(-> $ret:ty)?;)*) => {
         /// The loaded library and the functions taken from it. The function pointers stay valid
-        /// while `_lib` is alive, which is as long as this struct.
+        /// while `_lib` is alive, which is as long as this struct. (The frame builders are only
+        /// called by the tests against the real library.)
+        #[allow(dead_code)]
         pub struct Api {
             $($name: unsafe extern "C" fn($($arg),*) $(-> $ret)?,)*
             _lib: Library,
@@ -131,6 +167,10 @@ api! {
     ob_delete_device_info: fn(*mut ObDeviceInfo, Err);
     ob_device_info_get_name: fn(*const ObDeviceInfo, Err) -> *const c_char;
     ob_device_info_get_serial_number: fn(*const ObDeviceInfo, Err) -> *const c_char;
+    ob_device_info_get_pid: fn(*const ObDeviceInfo, Err) -> c_int;
+    ob_device_info_get_firmware_version: fn(*const ObDeviceInfo, Err) -> *const c_char;
+    ob_device_is_property_supported: fn(*const ObDevice, c_int, c_int, Err) -> bool;
+    ob_device_set_int_property: fn(*mut ObDevice, c_int, i32, Err);
     ob_device_get_supported_multi_device_sync_mode_bitmap: fn(*const ObDevice, Err) -> u16;
     ob_device_get_multi_device_sync_config: fn(*const ObDevice, Err) -> ObMultiDeviceSyncConfig;
     ob_device_set_multi_device_sync_config: fn(*mut ObDevice, *const ObMultiDeviceSyncConfig, Err);
@@ -143,6 +183,10 @@ api! {
     ob_stream_profile_list_get_video_stream_profile:
         fn(*const ObStreamProfileList, c_int, c_int, c_int, c_int, Err) -> *mut ObStreamProfile;
     ob_delete_stream_profile_list: fn(*const ObStreamProfileList, Err);
+    ob_stream_profile_list_get_count: fn(*const ObStreamProfileList, Err) -> u32;
+    ob_stream_profile_list_get_profile: fn(*const ObStreamProfileList, c_int, Err) -> *mut ObStreamProfile;
+    ob_stream_profile_get_format: fn(*const ObStreamProfile, Err) -> c_int;
+    ob_video_stream_profile_get_fps: fn(*const ObStreamProfile, Err) -> u32;
     ob_delete_stream_profile: fn(*const ObStreamProfile, Err);
     ob_video_stream_profile_get_intrinsic: fn(*const ObStreamProfile, Err) -> ObCameraIntrinsic;
     ob_video_stream_profile_get_width: fn(*const ObStreamProfile, Err) -> u32;
@@ -150,7 +194,6 @@ api! {
     ob_create_config: fn(Err) -> *mut ObConfig;
     ob_delete_config: fn(*mut ObConfig, Err);
     ob_config_enable_stream_with_stream_profile: fn(*mut ObConfig, *const ObStreamProfile, Err);
-    ob_config_set_align_mode: fn(*mut ObConfig, c_int, Err);
     ob_config_set_frame_aggregate_output_mode: fn(*mut ObConfig, c_int, Err);
     ob_pipeline_start_with_config: fn(*mut ObPipeline, *const ObConfig, Err);
     ob_pipeline_stop: fn(*mut ObPipeline, Err);
@@ -167,6 +210,23 @@ api! {
     ob_video_frame_get_width: fn(*const ObFrame, Err) -> u32;
     ob_video_frame_get_height: fn(*const ObFrame, Err) -> u32;
     ob_depth_frame_get_value_scale: fn(*const ObFrame, Err) -> f32;
+    ob_create_filter: fn(*const c_char, Err) -> *mut ObFilter;
+    ob_delete_filter: fn(*mut ObFilter, Err);
+    ob_filter_set_config_value: fn(*mut ObFilter, *const c_char, f64, Err);
+    ob_filter_process: fn(*mut ObFilter, *const ObFrame, Err) -> *mut ObFrame;
+    ob_create_video_stream_profile: fn(c_int, c_int, u32, u32, u32, Err) -> *mut ObStreamProfile;
+    ob_video_stream_profile_set_intrinsic: fn(*mut ObStreamProfile, ObCameraIntrinsic, Err);
+    ob_video_stream_profile_set_distortion: fn(*mut ObStreamProfile, ObCameraDistortion, Err);
+    ob_stream_profile_set_extrinsic_to:
+        fn(*mut ObStreamProfile, *const ObStreamProfile, ObExtrinsic, Err);
+    ob_create_video_frame: fn(c_int, c_int, u32, u32, u32, Err) -> *mut ObFrame;
+    ob_frame_set_stream_profile: fn(*mut ObFrame, *const ObStreamProfile, Err);
+    ob_frame_update_data: fn(*mut ObFrame, *const u8, u32, Err);
+    ob_frame_set_timestamp_us: fn(*mut ObFrame, u64, Err);
+    ob_frame_set_system_timestamp_us: fn(*mut ObFrame, u64, Err);
+    ob_depth_frame_set_value_scale: fn(*mut ObFrame, f32, Err);
+    ob_create_frameset: fn(Err) -> *mut ObFrame;
+    ob_frameset_push_frame: fn(*mut ObFrame, *const ObFrame, Err);
 }
 
 /// An error the SDK reported through `ob_error`, copied out and freed.
@@ -353,6 +413,24 @@ impl Drop for DeviceList {
     }
 }
 
+/// What a device says about itself (copied out of `ob_device_info`).
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct DeviceIdentity {
+    pub name: String,
+    pub serial: String,
+    pub pid: c_int,
+    pub firmware: String,
+}
+
+/// One entry of a stream profile list: size, `ob_format` and frame rate.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct ProfileDesc {
+    pub width: u32,
+    pub height: u32,
+    pub format: c_int,
+    pub fps: u32,
+}
+
 /// An opened `ob_device`.
 pub struct Device {
     sdk: Arc<Sdk>,
@@ -360,8 +438,8 @@ pub struct Device {
 }
 
 impl Device {
-    /// Name and serial number.
-    pub fn describe(&self) -> Result<(String, String), SdkError> {
+    /// Name, serial number, USB product id and firmware version.
+    pub fn describe(&self) -> Result<DeviceIdentity, SdkError> {
         let api = &self.sdk.api;
         // SAFETY: `self.ptr` is a live device; the info object is deleted below.
         let info = self.sdk.call("ob_device_get_device_info", |e| unsafe {
@@ -376,11 +454,34 @@ impl Device {
         let serial = self.sdk.call("ob_device_info_get_serial_number", |e| {
             cstr_to_string(unsafe { (api.ob_device_info_get_serial_number)(info, e) })
         });
+        // SAFETY: as above.
+        let firmware = self.sdk.call("ob_device_info_get_firmware_version", |e| {
+            cstr_to_string(unsafe { (api.ob_device_info_get_firmware_version)(info, e) })
+        });
+        // SAFETY: as above (a plain integer getter).
+        let pid = self
+            .sdk
+            .call("ob_device_info_get_pid", |e| unsafe { (api.ob_device_info_get_pid)(info, e) });
         // SAFETY: deleted once, not used afterwards.
         let _ = self
             .sdk
             .call("ob_delete_device_info", |e| unsafe { (api.ob_delete_device_info)(info, e) });
-        Ok((name?, serial?))
+        Ok(DeviceIdentity { name: name?, serial: serial?, pid: pid?, firmware: firmware? })
+    }
+
+    /// Whether the device lets us write integer property `id`.
+    pub fn property_writable(&self, id: c_int) -> Result<bool, SdkError> {
+        // SAFETY: `self.ptr` is a live device; `id` and the permission are plain integers.
+        self.sdk.call("ob_device_is_property_supported", |e| unsafe {
+            (self.sdk.api.ob_device_is_property_supported)(self.ptr, id, OB_PERMISSION_WRITE, e)
+        })
+    }
+
+    pub fn set_int_property(&self, id: c_int, value: i32) -> Result<(), SdkError> {
+        // SAFETY: `self.ptr` is a live device; an unknown id or value is reported via `ob_error`.
+        self.sdk.call("ob_device_set_int_property", |e| unsafe {
+            (self.sdk.api.ob_device_set_int_property)(self.ptr, id, value, e)
+        })
     }
 
     pub fn sync_modes(&self) -> Result<u16, SdkError> {
@@ -466,6 +567,59 @@ impl Profile {
     }
 }
 
+impl Profile {
+    /// Size, format and frame rate of a video profile.
+    pub fn desc(&self) -> Result<ProfileDesc, SdkError> {
+        let api = &self.sdk.api;
+        let (width, height) = self.size()?;
+        // SAFETY: `self.ptr` is a live video stream profile.
+        let format = self.sdk.call("ob_stream_profile_get_format", |e| unsafe {
+            (api.ob_stream_profile_get_format)(self.ptr, e)
+        })?;
+        // SAFETY: as above.
+        let fps = self.sdk.call("ob_video_stream_profile_get_fps", |e| unsafe {
+            (api.ob_video_stream_profile_get_fps)(self.ptr, e)
+        })?;
+        Ok(ProfileDesc { width, height, format, fps })
+    }
+
+    /// A free-standing video profile (for frames built without a camera).
+    #[cfg(test)]
+    pub fn new_video(
+        sdk: &Arc<Sdk>,
+        stream: c_int,
+        d: ProfileDesc,
+        k: ObCameraIntrinsic,
+    ) -> Result<Profile, SdkError> {
+        let api = &sdk.api;
+        // SAFETY: plain constructor with valid enumerators; owned by `Profile`.
+        let p = sdk.call("ob_create_video_stream_profile", |e| unsafe {
+            (api.ob_create_video_stream_profile)(stream, d.format, d.width, d.height, d.fps, e)
+        })?;
+        let profile =
+            Profile { sdk: Arc::clone(sdk), ptr: non_null(p, "ob_create_video_stream_profile")? };
+        // SAFETY: `profile.ptr` is live; the struct is passed by value.
+        sdk.call("ob_video_stream_profile_set_intrinsic", |e| unsafe {
+            (api.ob_video_stream_profile_set_intrinsic)(profile.ptr, k, e)
+        })?;
+        let none = ObCameraDistortion { model: OB_DISTORTION_NONE, ..Default::default() };
+        // SAFETY: as above.
+        sdk.call("ob_video_stream_profile_set_distortion", |e| unsafe {
+            (api.ob_video_stream_profile_set_distortion)(profile.ptr, none, e)
+        })?;
+        Ok(profile)
+    }
+
+    /// Record the extrinsic from this profile's stream to `target`'s.
+    #[cfg(test)]
+    pub fn set_extrinsic_to(&self, target: &Profile, x: ObExtrinsic) -> Result<(), SdkError> {
+        // SAFETY: both profiles are live; the struct is passed by value.
+        self.sdk.call("ob_stream_profile_set_extrinsic_to", |e| unsafe {
+            (self.sdk.api.ob_stream_profile_set_extrinsic_to)(self.ptr, target.ptr, x, e)
+        })
+    }
+}
+
 impl Drop for Profile {
     fn drop(&mut self) {
         // SAFETY: live and deleted once.
@@ -496,27 +650,62 @@ impl Pipeline {
         })
     }
 
-    /// The video profile of `sensor` with this size and format (0 = any size).
-    pub fn video_profile(
-        &self,
-        sensor: c_int,
-        width: u32,
-        height: u32,
-        format: c_int,
-    ) -> Result<Profile, SdkError> {
+    /// Every profile the pipeline offers for `sensor` (video profiles only).
+    pub fn profiles(&self, sensor: c_int) -> Result<Vec<ProfileDesc>, SdkError> {
         let api = &self.sdk.api;
         // SAFETY: `self.ptr` is a live pipeline; the list is deleted below.
         let list = self.sdk.call("ob_pipeline_get_stream_profile_list", |e| unsafe {
             (api.ob_pipeline_get_stream_profile_list)(self.ptr, sensor, e)
         })?;
         let list = non_null(list, "ob_pipeline_get_stream_profile_list")?;
-        let w = c_int::try_from(width).unwrap_or(0);
-        let h = c_int::try_from(height).unwrap_or(0);
+        let result = (|| {
+            // SAFETY: `list` is live.
+            let n = self.sdk.call("ob_stream_profile_list_get_count", |e| unsafe {
+                (api.ob_stream_profile_list_get_count)(list, e)
+            })?;
+            let mut out = Vec::new();
+            for i in 0..n.min(4096) {
+                let i = c_int::try_from(i).unwrap_or(c_int::MAX);
+                // SAFETY: `list` is live and `i` is below its count; the profile is owned below.
+                let p = self.sdk.call("ob_stream_profile_list_get_profile", |e| unsafe {
+                    (api.ob_stream_profile_list_get_profile)(list, i, e)
+                })?;
+                let p = Profile {
+                    sdk: Arc::clone(&self.sdk),
+                    ptr: non_null(p, "ob_stream_profile_list_get_profile")?,
+                };
+                out.push(p.desc()?);
+            }
+            Ok(out)
+        })();
+        // SAFETY: deleted once; profiles taken from it hold their own references.
+        let _ = self.sdk.call("ob_delete_stream_profile_list", |e| unsafe {
+            (api.ob_delete_stream_profile_list)(list, e)
+        });
+        result
+    }
+
+    /// The video profile of `sensor` with exactly this size, format and frame rate.
+    pub fn video_profile(&self, sensor: c_int, want: ProfileDesc) -> Result<Profile, SdkError> {
+        let api = &self.sdk.api;
+        // SAFETY: `self.ptr` is a live pipeline; the list is deleted below.
+        let list = self.sdk.call("ob_pipeline_get_stream_profile_list", |e| unsafe {
+            (api.ob_pipeline_get_stream_profile_list)(self.ptr, sensor, e)
+        })?;
+        let list = non_null(list, "ob_pipeline_get_stream_profile_list")?;
+        let w = c_int::try_from(want.width).unwrap_or(c_int::MAX);
+        let h = c_int::try_from(want.height).unwrap_or(c_int::MAX);
+        let fps = c_int::try_from(want.fps).unwrap_or(c_int::MAX);
         // SAFETY: `list` is live; the returned profile is owned by `Profile`.
         let profile =
             self.sdk.call("ob_stream_profile_list_get_video_stream_profile", |e| unsafe {
                 (api.ob_stream_profile_list_get_video_stream_profile)(
-                    list, w, h, format, OB_FPS_ANY, e,
+                    list,
+                    w,
+                    h,
+                    want.format,
+                    fps,
+                    e,
                 )
             });
         // SAFETY: deleted once; the profile holds its own reference.
@@ -527,7 +716,8 @@ impl Pipeline {
         Ok(Profile { sdk: Arc::clone(&self.sdk), ptr: p })
     }
 
-    /// Start colour + depth (aligned to colour, both frames required in every frameset).
+    /// Start colour + depth, both frames required in every frameset. (No pipeline align mode:
+    /// 2.9.3 ignores the software one; depth is aligned by [`AlignFilter`].)
     pub fn start(&mut self, color: &Profile, depth: &Profile) -> Result<(), SdkError> {
         let api = &self.sdk.api;
         // SAFETY: plain constructor; deleted below.
@@ -541,10 +731,6 @@ impl Pipeline {
             // SAFETY: as above.
             self.sdk.call("ob_config_enable_stream_with_stream_profile", |e| unsafe {
                 (api.ob_config_enable_stream_with_stream_profile)(config, depth.ptr, e)
-            })?;
-            // SAFETY: `config` live, valid enumerator.
-            self.sdk.call("ob_config_set_align_mode", |e| unsafe {
-                (api.ob_config_set_align_mode)(config, ALIGN_D2C_SW_MODE, e)
             })?;
             // SAFETY: `config` live, valid enumerator.
             self.sdk.call("ob_config_set_frame_aggregate_output_mode", |e| unsafe {
@@ -663,6 +849,68 @@ impl Frame {
         })
     }
 
+    /// A new video frame of `frame_type` with its profile, data, timestamps and (for depth)
+    /// value scale set: how the tests make frames the real library then processes.
+    #[cfg(test)]
+    pub fn new_video(
+        profile: &Profile,
+        frame_type: c_int,
+        d: ProfileDesc,
+        data: &[u8],
+        device_us: u64,
+        system_us: u64,
+        depth_scale_mm: Option<f32>,
+    ) -> Result<Frame, SdkError> {
+        let sdk = &profile.sdk;
+        let api = &sdk.api;
+        // SAFETY: plain constructor; stride 0 = computed from width and format.
+        let p = sdk.call("ob_create_video_frame", |e| unsafe {
+            (api.ob_create_video_frame)(frame_type, d.format, d.width, d.height, 0, e)
+        })?;
+        let frame = Frame { sdk: Arc::clone(sdk), ptr: non_null(p, "ob_create_video_frame")? };
+        let n = u32::try_from(data.len()).unwrap_or(u32::MAX);
+        // SAFETY: frame and profile are live; `data` is valid for `n` bytes during the call
+        // (the SDK copies it and checks `n` against the frame's size).
+        sdk.call("ob_frame_set_stream_profile", |e| unsafe {
+            (api.ob_frame_set_stream_profile)(frame.ptr, profile.ptr, e)
+        })?;
+        // SAFETY: as above.
+        sdk.call("ob_frame_update_data", |e| unsafe {
+            (api.ob_frame_update_data)(frame.ptr, data.as_ptr(), n, e)
+        })?;
+        // SAFETY: live frame.
+        sdk.call("ob_frame_set_timestamp_us", |e| unsafe {
+            (api.ob_frame_set_timestamp_us)(frame.ptr, device_us, e)
+        })?;
+        // SAFETY: live frame.
+        sdk.call("ob_frame_set_system_timestamp_us", |e| unsafe {
+            (api.ob_frame_set_system_timestamp_us)(frame.ptr, system_us, e)
+        })?;
+        if let Some(scale) = depth_scale_mm {
+            // SAFETY: live depth frame.
+            sdk.call("ob_depth_frame_set_value_scale", |e| unsafe {
+                (api.ob_depth_frame_set_value_scale)(frame.ptr, scale, e)
+            })?;
+        }
+        Ok(frame)
+    }
+
+    /// A frameset holding `frames` (each gains a reference held by the set).
+    #[cfg(test)]
+    pub fn new_frameset(sdk: &Arc<Sdk>, frames: &[&Frame]) -> Result<Frame, SdkError> {
+        let api = &sdk.api;
+        // SAFETY: plain constructor, owned by `Frame`.
+        let p = sdk.call("ob_create_frameset", |e| unsafe { (api.ob_create_frameset)(e) })?;
+        let set = Frame { sdk: Arc::clone(sdk), ptr: non_null(p, "ob_create_frameset")? };
+        for f in frames {
+            // SAFETY: both are live frames; the set takes its own reference to `f`.
+            sdk.call("ob_frameset_push_frame", |e| unsafe {
+                (api.ob_frameset_push_frame)(set.ptr, f.ptr, e)
+            })?;
+        }
+        Ok(set)
+    }
+
     /// The frame's bytes (valid while the frame is).
     pub fn data(&self) -> Result<&[u8], SdkError> {
         let api = &self.sdk.api;
@@ -680,6 +928,53 @@ impl Frame {
         // SAFETY: the SDK guarantees `n` readable bytes at `p` until the frame is deleted, which
         // cannot happen while `&self` is borrowed; nothing writes the buffer meanwhile.
         Ok(unsafe { std::slice::from_raw_parts(p, n as usize) })
+    }
+}
+
+/// The SDK's `Align` filter, set to align depth to the colour stream (D2C in software).
+pub struct AlignFilter {
+    sdk: Arc<Sdk>,
+    ptr: *mut ObFilter,
+}
+
+impl AlignFilter {
+    pub fn depth_to_color(sdk: &Arc<Sdk>) -> Result<AlignFilter, SdkError> {
+        let api = &sdk.api;
+        let name = c"Align";
+        // SAFETY: `name` is a valid C string for the call; the filter is owned by `AlignFilter`.
+        let p =
+            sdk.call("ob_create_filter", |e| unsafe { (api.ob_create_filter)(name.as_ptr(), e) })?;
+        let filter = AlignFilter { sdk: Arc::clone(sdk), ptr: non_null(p, "ob_create_filter")? };
+        let key = c"AlignType";
+        // SAFETY: live filter; `key` is a valid C string; OB_STREAM_COLOR is in the schema's range.
+        sdk.call("ob_filter_set_config_value", |e| unsafe {
+            (api.ob_filter_set_config_value)(
+                filter.ptr,
+                key.as_ptr(),
+                f64::from(OB_STREAM_COLOR),
+                e,
+            )
+        })?;
+        Ok(filter)
+    }
+
+    /// The frameset with its depth replaced by depth aligned to the colour frame; `None` when
+    /// the filter gives nothing back (it logs why).
+    pub fn process(&mut self, frameset: &Frame) -> Result<Option<Frame>, SdkError> {
+        // SAFETY: filter and frameset are live; a returned frame is a new reference we own.
+        let p = self.sdk.call("ob_filter_process", |e| unsafe {
+            (self.sdk.api.ob_filter_process)(self.ptr, frameset.ptr, e)
+        })?;
+        Ok((!p.is_null()).then(|| Frame { sdk: Arc::clone(&self.sdk), ptr: p }))
+    }
+}
+
+impl Drop for AlignFilter {
+    fn drop(&mut self) {
+        // SAFETY: live and deleted once.
+        let _ = self
+            .sdk
+            .call("ob_delete_filter", |e| unsafe { (self.sdk.api.ob_delete_filter)(self.ptr, e) });
     }
 }
 

@@ -1,17 +1,40 @@
-//! The Orbbec RGB-D camera (Gemini series) through the Orbbec SDK v2 C API, software-triggered.
+//! The Orbbec RGB-D camera (Gemini 305 family) through the Orbbec SDK v2 C API, hard-synced to
+//! the controller's captures.
 //!
 //! The SDK library is loaded at run time ([`ffi`], the only module with `unsafe`): by default
 //! `libOrbbecSDK.so` from `make setup`'s `.deps/lib` (unpacked from the `pyorbbecsdk2` wheel),
-//! or the path in the environment variable `HITL_ORBBEC_LIB`. A worker thread ([`worker`]) owns
-//! every SDK object; the tick-side [`OrbbecCamera`] only pushes capture requests into a lock-free
-//! queue and pops finished frames from another.
+//! or the path in the environment variable `HITL_ORBBEC_LIB`. The SDK calls the driver needs sit
+//! behind [`CameraSdk`] ([`sdk::SdkCamera`] on the real library; a scripted double in the tests).
+//! A worker thread ([`worker`]) owns the camera; the tick-side [`OrbbecCamera`] only pushes
+//! capture requests into a lock-free queue and pops finished frames from another.
+//!
+//! - `configure` picks colour RGB at the asked size and a Y16 depth profile at ONE frame rate
+//!   ([`profiles`]); `arm_trigger` sets the trigger mode ([`sync`]: hardware triggering where
+//!   Orbbec documents it, software triggering only where documented too), the exposure reference
+//!   point (middle), global timestamps, and starts the streams. Depth is aligned to colour by the
+//!   SDK's `Align` filter.
+//! - Frames are paired with their triggers by timestamps ([`pairing`]); each says whether its
+//!   time is the exposure (global timestamp) or the arrival ([`hitl_hal::TimestampSource`]).
+//! - Frame metadata from the SDK is checked before use ([`frame`]); a missed frameset is counted,
+//!   `max_consecutive_missed` in a row are a fault; a full capture queue is "busy" (`Timeout`).
+//! - [`probe`] lists the connected cameras for `hitl probe`.
 //!
 //! [`OrbbecCamera::open`] fails before anything moves, with kind `NotFound` and a message naming
-//! the Orbbec camera, when the library is missing or no camera is connected.
+//! the Orbbec camera, when the library is missing or no camera is connected. docs/orbbec.md.
 
+mod backend;
 mod error;
 mod ffi;
+pub mod frame;
+pub mod pairing;
+mod probe;
+pub mod profiles;
+mod sdk;
+pub mod sync;
 mod worker;
+
+#[cfg(test)]
+mod sdk_tests;
 
 use std::path::PathBuf;
 use std::sync::Arc;
@@ -25,8 +48,17 @@ use hitl_hal::{
     StreamConfig,
 };
 
+pub use backend::{CameraIdentity, CameraSdk, Setting, Stream};
 pub use error::OrbbecError;
+pub use frame::{FrameMeta, RawFrameset, RawImage};
+pub use probe::{probe, CameraInfo};
+pub use profiles::VideoProfile;
+pub use sdk::SdkCamera;
+pub use sync::{TriggerChoice, TriggerMode};
 use worker::{Command, Shared};
+
+/// Which camera was opened (name, serial, product id, firmware, SDK version).
+pub type OrbbecInfo = CameraIdentity;
 
 /// Environment variable that overrides the SDK library path.
 pub const LIBRARY_ENV: &str = "HITL_ORBBEC_LIB";
@@ -38,8 +70,18 @@ pub struct OrbbecOptions {
     pub library: PathBuf,
     /// Which enumerated camera to use.
     pub device_index: u32,
-    /// A software trigger without a frameset within this is a fault.
+    /// A trigger without a frameset within this is missed (counted).
     pub frame_timeout: Duration,
+    /// This many missed framesets in a row are a fault (the camera answers no trigger).
+    pub max_consecutive_missed: u32,
+    /// How early an exposure stamp may be, against its trigger, and still be that trigger's
+    /// frame (the global timestamp's fit error).
+    pub pairing_slack: Duration,
+    /// Hardware or software triggering (default: hardware where documented).
+    pub trigger: TriggerChoice,
+    /// `OB_PROP_USB_SYNC_VOLTAGE_LEVEL_INT` to write at arm (None: leave the camera's, 1.8 V by
+    /// default on the Gemini 305). Refused by firmware older than 1.0.76.
+    pub sync_voltage_level: Option<i32>,
     /// Frames waiting for `poll_frame` (older ones are dropped and counted).
     pub frame_queue: usize,
     /// Capture requests waiting for the worker.
@@ -67,6 +109,10 @@ impl Default for OrbbecOptions {
             library: Self::default_library(),
             device_index: 0,
             frame_timeout: Duration::from_millis(1000),
+            max_consecutive_missed: 3,
+            pairing_slack: Duration::from_millis(2),
+            trigger: TriggerChoice::Auto,
+            sync_voltage_level: None,
             frame_queue: 4,
             trigger_queue: 8,
             clock: MonotonicClock::new(),
@@ -74,18 +120,10 @@ impl Default for OrbbecOptions {
     }
 }
 
-/// Which camera was opened.
-#[derive(Debug, Clone, PartialEq, Eq)]
-pub struct OrbbecInfo {
-    pub name: String,
-    pub serial: String,
-    /// SDK version, e.g. "2.9.3".
-    pub sdk_version: String,
-}
-
-/// An Orbbec camera in software-trigger mode, behind [`RgbdCamera`].
+/// An Orbbec camera, hardware- or software-triggered, behind [`RgbdCamera`].
 pub struct OrbbecCamera {
     info: OrbbecInfo,
+    trigger_mode: Option<TriggerMode>,
     shared: Arc<Shared>,
     commands: Sender<Command>,
     worker: Option<JoinHandle<()>>,
@@ -94,6 +132,17 @@ pub struct OrbbecCamera {
 impl OrbbecCamera {
     /// Load the SDK, find the camera and open it. Blocks (about a second) while the SDK starts.
     pub fn open(options: OrbbecOptions) -> Result<Self, OrbbecError> {
+        let (library, index) = (options.library.clone(), options.device_index);
+        Self::open_with(move || SdkCamera::open(&library, index), options)
+    }
+
+    /// Open through any [`CameraSdk`]: `open` runs on the worker thread, which then owns the
+    /// camera (the tests drive the driver through a scripted double this way).
+    pub fn open_with<B, F>(open: F, options: OrbbecOptions) -> Result<Self, OrbbecError>
+    where
+        B: CameraSdk + 'static,
+        F: FnOnce() -> Result<B, OrbbecError> + Send + 'static,
+    {
         if options.frame_queue == 0 || options.trigger_queue == 0 {
             return Err(OrbbecError::new(
                 ErrorKind::InvalidRequest,
@@ -106,7 +155,7 @@ impl OrbbecCamera {
         let worker_shared = Arc::clone(&shared);
         let worker = std::thread::Builder::new()
             .name("orbbec".into())
-            .spawn(move || worker::run(options, worker_shared, cmd_rx, ready_tx))
+            .spawn(move || worker::run(open, options, worker_shared, cmd_rx, ready_tx))
             .map_err(|e| {
                 OrbbecError::new(
                     ErrorKind::Other,
@@ -127,7 +176,7 @@ impl OrbbecCamera {
                 ));
             }
         };
-        Ok(Self { info, shared, commands: cmd_tx, worker: Some(worker) })
+        Ok(Self { info, trigger_mode: None, shared, commands: cmd_tx, worker: Some(worker) })
     }
 
     pub fn info(&self) -> &OrbbecInfo {
@@ -139,9 +188,29 @@ impl OrbbecCamera {
         self.shared.fault.get()
     }
 
+    /// The trigger mode `arm_trigger` set (None before).
+    pub fn trigger_mode(&self) -> Option<TriggerMode> {
+        self.trigger_mode
+    }
+
     /// Frames dropped because `poll_frame` was not called in time.
     pub fn frames_dropped(&self) -> u64 {
         self.shared.frames_dropped()
+    }
+
+    /// Triggers that got no frameset within `frame_timeout` (or were given up for newer ones).
+    pub fn frames_missed(&self) -> u64 {
+        self.shared.frames_missed()
+    }
+
+    /// Framesets older than every pending trigger, dropped.
+    pub fn frames_stale(&self) -> u64 {
+        self.shared.frames_stale()
+    }
+
+    /// Framesets refused by the metadata checks (size, format, scale, timestamps).
+    pub fn frames_refused(&self) -> u64 {
+        self.shared.frames_bad()
     }
 
     fn ask<T>(
@@ -182,7 +251,9 @@ impl RgbdCamera for OrbbecCamera {
     }
 
     fn arm_trigger(&mut self) -> Result<(), OrbbecError> {
-        self.ask(Command::Arm)
+        let mode = self.ask(Command::Arm)?;
+        self.trigger_mode = Some(mode);
+        Ok(())
     }
 
     fn trigger(&mut self, request: CaptureRequest) -> Result<(), OrbbecError> {
@@ -196,6 +267,18 @@ impl RgbdCamera for OrbbecCamera {
         }
         self.shared.check()?;
         Ok(None)
+    }
+}
+
+/// Now on CLOCK_MONOTONIC in microseconds: the clock of the SDK's system and global timestamps
+/// once the driver has set the context to it (for doubles that stamp frames like the SDK).
+pub fn sdk_clock_now_us() -> u64 {
+    match nix::time::clock_gettime(nix::time::ClockId::CLOCK_MONOTONIC) {
+        Ok(t) => u64::try_from(t.tv_sec())
+            .unwrap_or(0)
+            .saturating_mul(1_000_000)
+            .saturating_add(u64::try_from(t.tv_nsec()).unwrap_or(0) / 1000),
+        Err(_) => 0,
     }
 }
 

@@ -1,33 +1,47 @@
-//! The Orbbec worker thread: owns the SDK session, configures streams, arms software triggering,
-//! and turns each capture request into one frameset converted to an [`RgbdFrame`].
+//! The Orbbec worker thread: owns the camera (any [`CameraSdk`]), and runs its state machine:
+//! opened -> configured (profiles chosen) -> streaming (trigger mode set, streams started) ->
+//! faulted (sticky). While streaming it fires software triggers for capture requests (software
+//! mode only; in hardware mode the trigger box fires the camera's sync input), waits for
+//! framesets, checks them, pairs each with its trigger by timestamps ([`Pairing`]) and hands the
+//! frames to the tick-side handle through a lock-free queue.
+//!
+//! A missed frameset is counted, not a fault; `max_consecutive_missed` misses in a row (the
+//! camera answers no trigger any more) are. Framesets older than their trigger are stale: dropped
+//! and counted.
 
-use std::path::Path;
 use std::sync::atomic::{AtomicBool, AtomicU64, AtomicU8, Ordering};
-use std::sync::{Arc, OnceLock};
+use std::sync::OnceLock;
 use std::time::Duration;
 
-use crossbeam_channel::{Receiver, RecvTimeoutError, Sender};
+use crossbeam_channel::{Receiver, RecvTimeoutError, Sender, TryRecvError};
 use crossbeam_queue::ArrayQueue;
 use hitl_hal::{
     CaptureRequest, Clock, ErrorKind, Intrinsics, MonotonicClock, RgbdFrame, StreamConfig,
+    TimestampSource,
 };
 use nix::time::{clock_gettime, ClockId};
 
+use super::backend::{CameraIdentity, CameraSdk, Setting, Stream};
 use super::error::OrbbecError;
-use super::ffi::{
-    Context, Device, Frame, Pipeline, Profile, Sdk, OB_FORMAT_RGB, OB_FORMAT_Y16,
-    OB_MULTI_DEVICE_SYNC_MODE_SOFTWARE_TRIGGERING, OB_SENSOR_COLOR, OB_SENSOR_DEPTH,
-};
-use super::{FrameQueue, OrbbecInfo, OrbbecOptions};
+use super::ffi::OB_MIDDLE_OF_EXPOSURE;
+use super::frame::{check_frameset, RawFrameset};
+use super::pairing::{Paired, Pairing};
+use super::profiles::{choose_profiles, VideoProfile};
+use super::sync::{choose_trigger, TriggerMode};
+use super::{FrameQueue, OrbbecOptions};
+
+/// How long one wait for a frameset lasts, so commands are still answered promptly.
+const POLL_MS: u32 = 5;
 
 /// Requests from the handle that need an answer (never sent from the tick).
 pub(super) enum Command {
     Configure(StreamConfig, Sender<Result<Intrinsics, OrbbecError>>),
-    Arm(Sender<Result<(), OrbbecError>>),
+    Arm(Sender<Result<TriggerMode, OrbbecError>>),
     Shutdown,
 }
 
-/// State shared by the tick-side handle and the worker: lock-free queues and a sticky fault.
+/// State shared by the tick-side handle and the worker: lock-free queues, counters and a sticky
+/// fault.
 pub(super) struct Shared {
     pub frames: FrameQueue,
     triggers: ArrayQueue<CaptureRequest>,
@@ -36,6 +50,9 @@ pub(super) struct Shared {
     fault_kind: AtomicU8,
     pub fault: OnceLock<OrbbecError>,
     dropped: AtomicU64,
+    missed: AtomicU64,
+    stale: AtomicU64,
+    bad: AtomicU64,
 }
 
 const KINDS: [ErrorKind; 7] = [
@@ -57,6 +74,9 @@ impl Shared {
             fault_kind: AtomicU8::new(0),
             fault: OnceLock::new(),
             dropped: AtomicU64::new(0),
+            missed: AtomicU64::new(0),
+            stale: AtomicU64::new(0),
+            bad: AtomicU64::new(0),
         }
     }
 
@@ -71,6 +91,10 @@ impl Shared {
         );
     }
 
+    fn faulted(&self) -> bool {
+        self.fault_kind.load(Ordering::Acquire) != 0
+    }
+
     /// `Ok` while healthy. Never allocates (the detail is in `fault`).
     pub fn check(&self) -> Result<(), OrbbecError> {
         match self.fault_kind.load(Ordering::Acquire) {
@@ -82,6 +106,8 @@ impl Shared {
         }
     }
 
+    /// From the tick: queue a capture request. A full queue is "busy" (`Timeout`): this capture
+    /// is lost, the camera still works. Never allocates or blocks.
     pub fn push_trigger(&self, request: CaptureRequest) -> Result<(), OrbbecError> {
         if !self.armed.load(Ordering::Acquire) {
             return Err(OrbbecError::new(
@@ -90,327 +116,306 @@ impl Shared {
             ));
         }
         self.triggers.push(request).map_err(|_| {
-            OrbbecError::new(ErrorKind::DeviceFault, "Orbbec camera: capture queue is full")
+            OrbbecError::new(ErrorKind::Timeout, "Orbbec camera: capture queue is full (busy)")
         })
     }
 
     pub fn frames_dropped(&self) -> u64 {
         self.dropped.load(Ordering::Relaxed)
     }
+
+    pub fn frames_missed(&self) -> u64 {
+        self.missed.load(Ordering::Relaxed)
+    }
+
+    pub fn frames_stale(&self) -> u64 {
+        self.stale.load(Ordering::Relaxed)
+    }
+
+    pub fn frames_bad(&self) -> u64 {
+        self.bad.load(Ordering::Relaxed)
+    }
 }
 
-/// The open SDK objects. Field order is drop order: pipeline and profiles before the device,
-/// the device before the context.
-struct Session {
-    pipeline: Pipeline,
-    color: Option<Profile>,
-    depth: Option<Profile>,
-    device: Device,
-    _context: Context,
+/// Where the worker's camera is in its life.
+enum State {
+    Opened,
+    Configured { color: VideoProfile, depth: VideoProfile, k: Intrinsics },
+    Streaming(Streaming),
+}
+
+#[derive(Clone, Copy)]
+struct Streaming {
+    mode: TriggerMode,
+    k: Intrinsics,
+    global: bool,
     monotonic: bool,
-    global_timestamps: bool,
-    intrinsics: Option<Intrinsics>,
-    name: String,
 }
 
-fn sdk_version(sdk: &Sdk) -> String {
-    let (a, b, c) = sdk.version();
-    format!("{a}.{b}.{c}")
+struct Worker<B> {
+    cam: B,
+    options: OrbbecOptions,
+    shared: std::sync::Arc<Shared>,
+    state: State,
+    pairing: Pairing,
+    consecutive_missed: u32,
+    last_bad: Option<OrbbecError>,
 }
 
-fn open_session(options: &OrbbecOptions) -> Result<(Session, OrbbecInfo), OrbbecError> {
-    let path: &Path = &options.library;
-    if !path.exists() {
-        return Err(OrbbecError::new(
-            ErrorKind::NotFound,
-            format!(
-                "Orbbec camera: the Orbbec SDK library is missing at {} (run `make setup`, or set \
-                 {} to the path of libOrbbecSDK.so)",
-                path.display(),
-                super::LIBRARY_ENV
-            ),
-        ));
-    }
-    let sdk = Sdk::load(path).map_err(|e| {
-        OrbbecError::new(
-            ErrorKind::NotFound,
-            format!("Orbbec camera: cannot load the Orbbec SDK library {}: {e}", path.display()),
-        )
-    })?;
-    let version = sdk_version(&sdk);
-    let _ = sdk.quiet_logs();
-    let context =
-        Context::new(&sdk).map_err(|e| OrbbecError::sdk("creating the SDK context", &e))?;
-    let monotonic = context.use_monotonic_timestamps().is_ok();
-    let list = context.devices().map_err(|e| OrbbecError::sdk("listing devices", &e))?;
-    let count = list.count().map_err(|e| OrbbecError::sdk("counting devices", &e))?;
-    if count == 0 {
-        return Err(OrbbecError::new(
-            ErrorKind::NotFound,
-            format!(
-                "no Orbbec camera found: Orbbec SDK {version} ({}) sees no device; connect the \
-                 Orbbec camera (USB 3) and install its udev rules",
-                path.display()
-            ),
-        ));
-    }
-    if options.device_index >= count {
-        return Err(OrbbecError::new(
-            ErrorKind::NotFound,
-            format!(
-                "Orbbec camera #{} not found: the Orbbec SDK sees {count} camera(s)",
-                options.device_index
-            ),
-        ));
-    }
-    let device = list
-        .device(options.device_index)
-        .map_err(|e| OrbbecError::sdk("opening the Orbbec camera", &e))?;
-    drop(list);
-    let (name, serial) =
-        device.describe().map_err(|e| OrbbecError::sdk("reading device info", &e))?;
-    let pipeline =
-        Pipeline::new(&device).map_err(|e| OrbbecError::sdk("creating the pipeline", &e))?;
-    let info = OrbbecInfo { name: name.clone(), serial, sdk_version: version };
-    let session = Session {
-        pipeline,
-        color: None,
-        depth: None,
-        device,
-        _context: context,
-        monotonic,
-        global_timestamps: false,
-        intrinsics: None,
-        name,
-    };
-    Ok((session, info))
-}
-
-impl Session {
+impl<B: CameraSdk> Worker<B> {
     fn configure(&mut self, config: &StreamConfig) -> Result<Intrinsics, OrbbecError> {
-        let (w, h) = (config.intrinsics.width, config.intrinsics.height);
-        let color =
-            self.pipeline.video_profile(OB_SENSOR_COLOR, w, h, OB_FORMAT_RGB).map_err(|e| {
-                OrbbecError::new(
-                    ErrorKind::InvalidRequest,
-                    format!("Orbbec camera {} has no RGB colour stream at {w}x{h}: {e}", self.name),
-                )
-            })?;
-        let depth =
-            self.pipeline.video_profile(OB_SENSOR_DEPTH, 0, 0, OB_FORMAT_Y16).map_err(|e| {
-                OrbbecError::new(
-                    ErrorKind::InvalidRequest,
-                    format!("Orbbec camera {} has no Y16 depth stream: {e}", self.name),
-                )
-            })?;
-        let k = color.intrinsic().map_err(|e| OrbbecError::sdk("reading colour intrinsics", &e))?;
-        let (pw, ph) = color.size().map_err(|e| OrbbecError::sdk("reading colour size", &e))?;
-        let intrinsics = Intrinsics {
-            width: pw,
-            height: ph,
-            fx: f64::from(k.fx),
-            fy: f64::from(k.fy),
-            cx: f64::from(k.cx),
-            cy: f64::from(k.cy),
-        };
-        self.color = Some(color);
-        self.depth = Some(depth);
-        self.intrinsics = Some(intrinsics);
-        Ok(intrinsics)
-    }
-
-    fn arm(&mut self) -> Result<(), OrbbecError> {
-        let (Some(color), Some(depth)) = (&self.color, &self.depth) else {
+        if matches!(self.state, State::Streaming(_)) {
             return Err(OrbbecError::new(
                 ErrorKind::InvalidRequest,
-                "Orbbec camera: arm_trigger before configure",
-            ));
-        };
-        let modes =
-            self.device.sync_modes().map_err(|e| OrbbecError::sdk("reading sync modes", &e))?;
-        if i32::from(modes) & OB_MULTI_DEVICE_SYNC_MODE_SOFTWARE_TRIGGERING == 0 {
-            return Err(OrbbecError::new(
-                ErrorKind::InvalidRequest,
-                format!("Orbbec camera {} does not support software triggering", self.name),
+                "Orbbec camera: configure after arm_trigger (the streams are running)",
             ));
         }
-        let mut sync =
-            self.device.sync_config().map_err(|e| OrbbecError::sdk("reading sync config", &e))?;
-        sync.sync_mode = OB_MULTI_DEVICE_SYNC_MODE_SOFTWARE_TRIGGERING;
-        sync.frames_per_trigger = 1;
-        sync.trigger_to_image_delay_us = 0;
-        sync.depth_delay_us = 0;
-        sync.color_delay_us = 0;
-        // Optional: cameras without global timestamps fall back to arrival times.
-        self.global_timestamps = self.device.enable_global_timestamps().unwrap_or(false);
-        self.device
-            .set_sync_config(&sync)
-            .map_err(|e| OrbbecError::sdk("setting software-trigger mode", &e))?;
-        self.pipeline
-            .start(color, depth)
-            .map_err(|e| OrbbecError::sdk("starting colour + depth streams", &e))
+        let (w, h) = (config.intrinsics.width, config.intrinsics.height);
+        let colors = self.cam.profiles(Stream::Color)?;
+        let depths = self.cam.profiles(Stream::Depth)?;
+        let (color, depth) = choose_profiles(&colors, &depths, w, h)?;
+        let k = self.cam.intrinsics(color)?;
+        if (k.width, k.height) != (w, h) {
+            return Err(OrbbecError::new(
+                ErrorKind::DeviceFault,
+                format!(
+                    "Orbbec camera: colour profile {color} reports a {}x{} image",
+                    k.width, k.height
+                ),
+            ));
+        }
+        self.state = State::Configured { color, depth, k };
+        Ok(k)
     }
 
-    fn capture(
-        &mut self,
-        request: CaptureRequest,
-        options: &OrbbecOptions,
-    ) -> Result<RgbdFrame, OrbbecError> {
-        self.device.trigger_capture().map_err(|e| OrbbecError::sdk("software trigger", &e))?;
-        let ms = u32::try_from(options.frame_timeout.as_millis()).unwrap_or(u32::MAX);
-        let set = self
-            .pipeline
-            .wait_frameset(ms)
-            .map_err(|e| OrbbecError::sdk("waiting for a frameset", &e))?
-            .ok_or_else(|| {
-                OrbbecError::new(
-                    ErrorKind::Timeout,
+    fn arm(&mut self) -> Result<TriggerMode, OrbbecError> {
+        let (color, depth, k) = match &self.state {
+            State::Opened => {
+                return Err(OrbbecError::new(
+                    ErrorKind::InvalidRequest,
+                    "Orbbec camera: arm_trigger before configure",
+                ))
+            }
+            State::Streaming(s) => return Ok(s.mode),
+            State::Configured { color, depth, k } => (*color, *depth, *k),
+        };
+        let id = self.cam.identity()?;
+        let advertised = self.cam.advertised_sync_modes()?;
+        let mode = choose_trigger(id.product_id, advertised, self.options.trigger)?;
+        self.cam.set_trigger_mode(mode)?;
+        // Optional on older firmware; the lab check says which point the stamps mark.
+        self.cam.set(Setting::ExposureReference, OB_MIDDLE_OF_EXPOSURE)?;
+        if let Some(level) = self.options.sync_voltage_level {
+            if !self.cam.set(Setting::SyncVoltageLevel, level)? {
+                return Err(OrbbecError::new(
+                    ErrorKind::InvalidRequest,
                     format!(
-                        "Orbbec camera: no frameset within {ms} ms of the software trigger for tick {}",
-                        request.tick
+                        "Orbbec {} (firmware {}) cannot set the sync voltage level (needs \
+                         firmware >= 1.0.76)",
+                        id.name, id.firmware
                     ),
-                )
-            })?;
-        let color =
-            set.color().map_err(|e| OrbbecError::sdk("colour frame", &e))?.ok_or_else(|| {
-                OrbbecError::new(ErrorKind::DeviceFault, "Orbbec camera: frameset without colour")
-            })?;
-        let depth =
-            set.depth().map_err(|e| OrbbecError::sdk("depth frame", &e))?.ok_or_else(|| {
-                OrbbecError::new(ErrorKind::DeviceFault, "Orbbec camera: frameset without depth")
-            })?;
-        let intrinsics = self.intrinsics.ok_or_else(|| {
-            OrbbecError::new(ErrorKind::InvalidRequest, "Orbbec camera: capture before configure")
-        })?;
-        let (device_us, system_us, global_us) =
-            color.timestamps_us().map_err(|e| OrbbecError::sdk("frame timestamps", &e))?;
-        // Exposure on the host clock where the camera can say it; else the arrival time, which
-        // is later than the exposure by the transfer time.
-        let host_us = if self.global_timestamps && global_us != 0 { global_us } else { system_us };
-        Ok(RgbdFrame {
-            request,
-            device_ns: device_us.saturating_mul(1000),
-            exposure_ns: host_ns(host_us, self.monotonic, &options.clock),
-            intrinsics,
-            color: color_rgb8(&color, intrinsics)?,
-            depth_m: depth_metres(&depth, intrinsics)?,
-            mask: None,
-        })
+                ));
+            }
+        }
+        let global = self.cam.enable_global_timestamps()?;
+        self.cam.start(color, depth)?;
+        let monotonic = self.cam.monotonic_stamps();
+        self.state = State::Streaming(Streaming { mode, k, global, monotonic });
+        Ok(mode)
+    }
+
+    fn missed(&mut self, n: u32, mode: TriggerMode) {
+        if n == 0 {
+            return;
+        }
+        self.shared.missed.fetch_add(u64::from(n), Ordering::Relaxed);
+        self.consecutive_missed = self.consecutive_missed.saturating_add(n);
+        if self.consecutive_missed >= self.options.max_consecutive_missed {
+            let hint = match mode {
+                TriggerMode::Hardware => {
+                    "; is the trigger box's camera line wired to the camera's sync input?"
+                }
+                TriggerMode::Software => "",
+            };
+            let last = match &self.last_bad {
+                Some(e) => format!("; last refused frameset: {}", e.message()),
+                None => String::new(),
+            };
+            self.shared.trip(OrbbecError::new(
+                ErrorKind::DeviceFault,
+                format!(
+                    "Orbbec camera answered none of the last {} triggers ({mode}){hint}{last}",
+                    self.consecutive_missed
+                ),
+            ));
+        }
+    }
+
+    fn frameset(&mut self, set: &RawFrameset, s: &Streaming) {
+        let (color, depth_m, stamp_us, exposure, device_ns) =
+            match check_frameset(set, &s.k, s.global) {
+                Ok(v) => v,
+                Err(e) => {
+                    self.shared.bad.fetch_add(1, Ordering::Relaxed);
+                    self.last_bad = Some(e);
+                    return;
+                }
+            };
+        let exposure_ns = host_ns(stamp_us, s.monotonic, &self.options.clock);
+        // A hardware trigger's frame can come in before the tick's request was taken over.
+        if !self.take_triggers(s.mode) {
+            return;
+        }
+        match self.pairing.pair(exposure_ns, exposure) {
+            Paired::Stale => {
+                self.shared.stale.fetch_add(1, Ordering::Relaxed);
+            }
+            Paired::Frame { request, missed } => {
+                self.shared.missed.fetch_add(u64::from(missed), Ordering::Relaxed);
+                self.consecutive_missed = 0;
+                let frame = RgbdFrame {
+                    request,
+                    device_ns,
+                    exposure_ns,
+                    timestamp: if exposure {
+                        TimestampSource::DeviceExposure
+                    } else {
+                        TimestampSource::HostArrival
+                    },
+                    intrinsics: s.k,
+                    color,
+                    depth_m,
+                    mask: None,
+                };
+                if self.shared.frames.force_push(frame).is_some() {
+                    self.shared.dropped.fetch_add(1, Ordering::Relaxed);
+                }
+            }
+        }
+    }
+
+    /// Move the tick's capture requests into the pairing (firing a software trigger for each in
+    /// software mode). False when the camera tripped.
+    fn take_triggers(&mut self, mode: TriggerMode) -> bool {
+        while let Some(req) = self.shared.triggers.pop() {
+            if mode == TriggerMode::Software {
+                if let Err(e) = self.cam.software_trigger() {
+                    self.shared.trip(e);
+                    return false;
+                }
+            }
+            if self.pairing.push(req).is_some() {
+                self.missed(1, mode);
+            }
+        }
+        !self.shared.faulted()
+    }
+
+    /// One round while streaming: fire queued triggers, wait briefly for a frameset, expire.
+    fn stream_once(&mut self) {
+        let State::Streaming(s) = &self.state else { return };
+        let s = *s;
+        if !self.take_triggers(s.mode) {
+            return;
+        }
+        match self.cam.wait_frameset(POLL_MS) {
+            Err(e) => {
+                self.shared.trip(e);
+                return;
+            }
+            Ok(Some(set)) => self.frameset(&set, &s),
+            Ok(None) => {}
+        }
+        let timeout_ns = u64::try_from(self.options.frame_timeout.as_nanos()).unwrap_or(u64::MAX);
+        let n = self.pairing.expire(self.options.clock.now_ns(), timeout_ns);
+        self.missed(n, s.mode);
     }
 }
 
-/// Map an SDK system timestamp (CLOCK_MONOTONIC or CLOCK_REALTIME, µs) onto `clock`.
-fn host_ns(system_us: u64, monotonic: bool, clock: &MonotonicClock) -> u64 {
+/// Map an SDK host timestamp (CLOCK_MONOTONIC or CLOCK_REALTIME, µs) onto `clock`.
+pub(super) fn host_ns(system_us: u64, monotonic: bool, clock: &MonotonicClock) -> u64 {
     let id = if monotonic { ClockId::CLOCK_MONOTONIC } else { ClockId::CLOCK_REALTIME };
     let Ok(now) = clock_gettime(id) else {
         return clock.now_ns();
     };
-    let now_ns = u64::try_from(now.tv_sec()).unwrap_or(0).saturating_mul(1_000_000_000)
-        + u64::try_from(now.tv_nsec()).unwrap_or(0);
+    let now_ns = u64::try_from(now.tv_sec())
+        .unwrap_or(0)
+        .saturating_mul(1_000_000_000)
+        .saturating_add(u64::try_from(now.tv_nsec()).unwrap_or(0));
     let age_ns = now_ns.saturating_sub(system_us.saturating_mul(1000));
     clock.now_ns().saturating_sub(age_ns)
 }
 
-fn bad_frame(what: String) -> OrbbecError {
-    OrbbecError::new(ErrorKind::DeviceFault, format!("Orbbec camera: {what}"))
-}
-
-fn color_rgb8(frame: &Frame, k: Intrinsics) -> Result<Vec<u8>, OrbbecError> {
-    let fmt = frame.format().map_err(|e| OrbbecError::sdk("colour format", &e))?;
-    if fmt != OB_FORMAT_RGB {
-        return Err(bad_frame(format!("colour frame has format {fmt}, expected RGB (22)")));
-    }
-    let (w, h) = frame.size().map_err(|e| OrbbecError::sdk("colour size", &e))?;
-    let data = frame.data().map_err(|e| OrbbecError::sdk("colour data", &e))?;
-    let want = (w as usize) * (h as usize) * 3;
-    if (w, h) != (k.width, k.height) || data.len() < want {
-        return Err(bad_frame(format!(
-            "colour frame {w}x{h} with {} bytes does not match {}x{} rgb8",
-            data.len(),
-            k.width,
-            k.height
-        )));
-    }
-    Ok(data[..want].to_vec())
-}
-
-fn depth_metres(frame: &Frame, k: Intrinsics) -> Result<Vec<f32>, OrbbecError> {
-    let fmt = frame.format().map_err(|e| OrbbecError::sdk("depth format", &e))?;
-    if fmt != OB_FORMAT_Y16 {
-        return Err(bad_frame(format!("depth frame has format {fmt}, expected Y16 (8)")));
-    }
-    let (w, h) = frame.size().map_err(|e| OrbbecError::sdk("depth size", &e))?;
-    let scale_mm = frame.depth_scale_mm().map_err(|e| OrbbecError::sdk("depth scale", &e))?;
-    let data = frame.data().map_err(|e| OrbbecError::sdk("depth data", &e))?;
-    let n = (w as usize) * (h as usize);
-    if (w, h) != (k.width, k.height)
-        || data.len() < n * 2
-        || !scale_mm.is_finite()
-        || scale_mm <= 0.0
-    {
-        return Err(bad_frame(format!(
-            "depth frame {w}x{h} ({} bytes, scale {scale_mm} mm) is not aligned to colour {}x{}",
-            data.len(),
-            k.width,
-            k.height
-        )));
-    }
-    Ok(y16_to_metres(&data[..n * 2], scale_mm))
-}
-
-/// Little-endian 16-bit depth units to metres (`scale_mm` millimetres per unit; 0 stays 0).
-fn y16_to_metres(data: &[u8], scale_mm: f32) -> Vec<f32> {
-    let to_m = scale_mm / 1000.0;
-    data.chunks_exact(2).map(|b| f32::from(u16::from_le_bytes([b[0], b[1]])) * to_m).collect()
-}
-
-/// The worker thread's body.
-pub(super) fn run(
+/// The worker thread's body: open the camera with `open`, then serve commands and captures.
+pub(super) fn run<B: CameraSdk>(
+    open: impl FnOnce() -> Result<B, OrbbecError>,
     options: OrbbecOptions,
-    shared: Arc<Shared>,
+    shared: std::sync::Arc<Shared>,
     commands: Receiver<Command>,
-    ready: Sender<Result<OrbbecInfo, OrbbecError>>,
+    ready: Sender<Result<CameraIdentity, OrbbecError>>,
 ) {
-    let mut session = match open_session(&options) {
-        Ok((s, info)) => {
-            let _ = ready.send(Ok(info));
-            s
+    let opened = open().and_then(|mut cam| cam.identity().map(|id| (cam, id)));
+    let cam = match opened {
+        Ok((cam, id)) => {
+            let _ = ready.send(Ok(id));
+            cam
         }
         Err(e) => {
             let _ = ready.send(Err(e));
             return;
         }
     };
+    let slack_ns = u64::try_from(options.pairing_slack.as_nanos()).unwrap_or(u64::MAX);
+    let pairing = Pairing::new(options.trigger_queue, slack_ns);
+    let mut w = Worker {
+        cam,
+        options,
+        shared,
+        state: State::Opened,
+        pairing,
+        consecutive_missed: 0,
+        last_bad: None,
+    };
     loop {
-        match commands.recv_timeout(Duration::from_millis(1)) {
-            Ok(Command::Configure(c, reply)) => {
-                let _ = reply.send(session.configure(&c));
+        let streaming = matches!(w.state, State::Streaming(_)) && !w.shared.faulted();
+        let cmd = if streaming {
+            match w.commands_try(&commands) {
+                Some(c) => Some(c),
+                None => {
+                    w.stream_once();
+                    continue;
+                }
             }
-            Ok(Command::Arm(reply)) => {
-                let r = session.arm();
+        } else {
+            match commands.recv_timeout(Duration::from_millis(u64::from(POLL_MS))) {
+                Ok(c) => Some(c),
+                Err(RecvTimeoutError::Timeout) => None,
+                Err(RecvTimeoutError::Disconnected) => Some(Command::Shutdown),
+            }
+        };
+        match cmd {
+            Some(Command::Configure(c, reply)) => {
+                let _ = reply.send(w.configure(&c));
+            }
+            Some(Command::Arm(reply)) => {
+                let r = w.arm();
                 if r.is_ok() {
-                    shared.armed.store(true, Ordering::Release);
+                    w.shared.armed.store(true, Ordering::Release);
                 }
                 let _ = reply.send(r);
             }
-            Ok(Command::Shutdown) | Err(RecvTimeoutError::Disconnected) => return,
-            Err(RecvTimeoutError::Timeout) => {}
+            Some(Command::Shutdown) => return,
+            None => {}
         }
-        if shared.fault.get().is_some() {
-            continue;
-        }
-        while let Some(req) = shared.triggers.pop() {
-            match session.capture(req, &options) {
-                Ok(frame) => {
-                    if shared.frames.force_push(frame).is_some() {
-                        shared.dropped.fetch_add(1, Ordering::Relaxed);
-                    }
-                }
-                Err(e) => {
-                    shared.trip(e);
-                    break;
-                }
-            }
+    }
+}
+
+impl<B> Worker<B> {
+    fn commands_try(&self, commands: &Receiver<Command>) -> Option<Command> {
+        match commands.try_recv() {
+            Ok(c) => Some(c),
+            Err(TryRecvError::Empty) => None,
+            Err(TryRecvError::Disconnected) => Some(Command::Shutdown),
         }
     }
 }
@@ -418,14 +423,6 @@ pub(super) fn run(
 #[cfg(test)]
 mod tests {
     use super::*;
-
-    #[test]
-    fn depth_units_become_metres() {
-        let data = [0x00, 0x00, 0xE8, 0x03, 0x10, 0x27];
-        assert_eq!(y16_to_metres(&data, 1.0), vec![0.0, 1.0, 10.0]);
-        let half = y16_to_metres(&data, 0.5);
-        assert!((half[1] - 0.5).abs() < 1e-6);
-    }
 
     #[test]
     fn a_fresh_monotonic_stamp_maps_to_about_now() {

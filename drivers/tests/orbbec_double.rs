@@ -1,0 +1,354 @@
+//! The Orbbec driver's state machine on a scripted double of the SDK surface ([`CameraSdk`]):
+//! configure -> arm -> trigger -> frames, in hardware and software triggering, and what happens
+//! on stale framesets (older than their trigger), missed ones, a full capture queue, refused
+//! metadata and an unplugged camera. No camera and no SDK library needed.
+
+use std::sync::{Arc, Mutex};
+use std::time::{Duration, Instant};
+
+use crossbeam_channel::{unbounded, Receiver, Sender};
+use hitl_drivers::orbbec::{
+    sdk_clock_now_us, CameraIdentity, CameraSdk, FrameMeta, OrbbecCamera, OrbbecError,
+    OrbbecOptions, RawFrameset, RawImage, Setting, Stream, TriggerChoice, TriggerMode,
+    VideoProfile,
+};
+use hitl_hal::{
+    CaptureRequest, Clock, Error, ErrorKind, Intrinsics, MonotonicClock, RgbdCamera, RgbdFrame,
+    StreamConfig, TimestampSource,
+};
+
+const W: u32 = 8;
+const H: u32 = 6;
+
+enum Step {
+    Frames(RawFrameset),
+    Fail(OrbbecError),
+    /// Block in `wait_frameset` this long (a slow SDK call), then time out.
+    Stall(Duration),
+}
+
+struct Double {
+    pid: u16,
+    global: bool,
+    steps: Receiver<Step>,
+    log: Arc<Mutex<Vec<String>>>,
+}
+
+impl Double {
+    fn note(&self, s: String) {
+        self.log.lock().expect("log").push(s);
+    }
+}
+
+fn intrinsics() -> Intrinsics {
+    Intrinsics { width: W, height: H, fx: 10.0, fy: 10.0, cx: 4.0, cy: 3.0 }
+}
+
+impl CameraSdk for Double {
+    fn identity(&mut self) -> Result<CameraIdentity, OrbbecError> {
+        Ok(CameraIdentity {
+            name: "Orbbec Gemini 305 (double)".into(),
+            serial: "CP0000000001".into(),
+            product_id: self.pid,
+            firmware: "1.0.80".into(),
+            sdk_version: "2.9.3".into(),
+        })
+    }
+    fn profiles(&mut self, stream: Stream) -> Result<Vec<VideoProfile>, OrbbecError> {
+        let p = |width, height, format, fps| VideoProfile { width, height, format, fps };
+        Ok(match stream {
+            Stream::Color => vec![p(W, H, 22, 60), p(W, H, 22, 30), p(W, H, 5, 30)],
+            Stream::Depth => vec![p(4, 3, 8, 60), p(16, 12, 8, 30), p(4, 3, 8, 30)],
+        })
+    }
+    fn intrinsics(&mut self, _color: VideoProfile) -> Result<Intrinsics, OrbbecError> {
+        Ok(intrinsics())
+    }
+    fn advertised_sync_modes(&mut self) -> Result<u16, OrbbecError> {
+        Ok(0x7F) // everything, as 2.9.3 does for the whole family
+    }
+    fn set_trigger_mode(&mut self, mode: TriggerMode) -> Result<(), OrbbecError> {
+        self.note(format!("mode {mode}"));
+        Ok(())
+    }
+    fn set(&mut self, setting: Setting, value: i32) -> Result<bool, OrbbecError> {
+        self.note(format!("set {setting:?} {value}"));
+        Ok(true)
+    }
+    fn enable_global_timestamps(&mut self) -> Result<bool, OrbbecError> {
+        Ok(self.global)
+    }
+    fn monotonic_stamps(&self) -> bool {
+        true
+    }
+    fn start(&mut self, color: VideoProfile, depth: VideoProfile) -> Result<(), OrbbecError> {
+        self.note(format!("start {color} + {depth}"));
+        Ok(())
+    }
+    fn software_trigger(&mut self) -> Result<(), OrbbecError> {
+        self.note("software trigger".into());
+        Ok(())
+    }
+    fn wait_frameset(&mut self, timeout_ms: u32) -> Result<Option<RawFrameset>, OrbbecError> {
+        match self.steps.recv_timeout(Duration::from_millis(u64::from(timeout_ms))) {
+            Ok(Step::Frames(f)) => Ok(Some(f)),
+            Ok(Step::Fail(e)) => Err(e),
+            Ok(Step::Stall(d)) => {
+                self.note("stalling".into());
+                std::thread::sleep(d);
+                Ok(None)
+            }
+            Err(_) => Ok(None),
+        }
+    }
+}
+
+struct Rig {
+    cam: OrbbecCamera,
+    steps: Sender<Step>,
+    log: Arc<Mutex<Vec<String>>>,
+    clock: MonotonicClock,
+}
+
+fn rig_with(pid: u16, global: bool, tune: impl FnOnce(&mut OrbbecOptions)) -> Rig {
+    let clock = MonotonicClock::new();
+    let (tx, rx) = unbounded();
+    let log = Arc::new(Mutex::new(Vec::new()));
+    let double = Double { pid, global, steps: rx, log: Arc::clone(&log) };
+    let mut options = OrbbecOptions {
+        clock,
+        frame_timeout: Duration::from_millis(60),
+        ..OrbbecOptions::default()
+    };
+    tune(&mut options);
+    let cam = OrbbecCamera::open_with(move || Ok(double), options).expect("open the double");
+    Rig { cam, steps: tx, log, clock }
+}
+
+fn config() -> StreamConfig {
+    StreamConfig { intrinsics: intrinsics(), mask: false }
+}
+
+fn armed(pid: u16, global: bool, tune: impl FnOnce(&mut OrbbecOptions)) -> Rig {
+    let mut r = rig_with(pid, global, tune);
+    assert_eq!(r.cam.configure(&config()), Ok(intrinsics()));
+    r.cam.arm_trigger().expect("arm");
+    r
+}
+
+/// A frameset stamped at `at_ns` on the controller's clock (as the SDK stamps: CLOCK_MONOTONIC
+/// microseconds), colour filled with `mark`, depth 1.5 m (units of 1 mm).
+fn frameset(r: &Rig, at_ns: u64, mark: u8, global: bool) -> RawFrameset {
+    let age_ns = i128::from(r.clock.now_ns()) - i128::from(at_ns);
+    let sdk_us = u64::try_from(i128::from(sdk_clock_now_us()) - age_ns / 1000).expect("stamp");
+    let meta = |format, scale| FrameMeta {
+        width: W,
+        height: H,
+        format,
+        device_us: 77,
+        system_us: sdk_us + 20_000, // arrives 20 ms after the exposure
+        global_us: if global { sdk_us } else { 0 },
+        depth_scale_mm: scale,
+    };
+    let depth: Vec<u8> = (0..W * H).flat_map(|_| 1500u16.to_le_bytes()).collect();
+    RawFrameset {
+        color: Some(RawImage { meta: meta(22, 0.0), data: vec![mark; (W * H * 3) as usize] }),
+        depth: Some(RawImage { meta: meta(8, 1.0), data: depth }),
+    }
+}
+
+fn fire(r: &mut Rig, tick: u64) -> CaptureRequest {
+    let req = CaptureRequest { tick, fired_ns: r.clock.now_ns() };
+    r.cam.trigger(req).expect("trigger");
+    req
+}
+
+/// Poll like the tick does until a frame comes or `within` passes.
+fn next_frame(r: &mut Rig, within: Duration) -> Result<Option<RgbdFrame>, OrbbecError> {
+    let end = Instant::now() + within;
+    while Instant::now() < end {
+        if let Some(f) = r.cam.poll_frame()? {
+            return Ok(Some(f));
+        }
+        std::thread::sleep(Duration::from_millis(1));
+    }
+    Ok(None)
+}
+
+fn log(r: &Rig) -> Vec<String> {
+    r.log.lock().expect("log").clone()
+}
+
+#[test]
+fn a_hardware_triggered_frame_comes_back_paired_and_in_metres() {
+    let mut r = armed(0x0842, true, |_| {});
+    assert_eq!(r.cam.trigger_mode(), Some(TriggerMode::Hardware));
+    assert_eq!(
+        log(&r),
+        vec![
+            "mode hardware triggering".to_string(),
+            "set ExposureReference 1".into(),
+            // One frame rate for both (30, preferred), depth of the colour's size absent: the
+            // largest depth at 30 fps.
+            "start 8x6 RGB(22) @30 fps + 16x12 Y16(8) @30 fps".into(),
+        ]
+    );
+    let req = fire(&mut r, 7);
+    let exposed = req.fired_ns + 1_000_000;
+    std::thread::sleep(Duration::from_millis(2)); // stamps from the past, as the SDK's are
+    r.steps.send(Step::Frames(frameset(&r, exposed, 9, true))).expect("send");
+    let f = next_frame(&mut r, Duration::from_secs(2)).expect("healthy").expect("a frame");
+    assert_eq!(f.request, req);
+    assert_eq!(f.timestamp, TimestampSource::DeviceExposure);
+    // Within the two clocks' reading jitter (5 ms allows a loaded CI box; the arrival is 20 ms).
+    assert!(f.exposure_ns.abs_diff(exposed) < 5_000_000, "{} vs {exposed}", f.exposure_ns);
+    assert_eq!(f.device_ns, 77_000);
+    assert_eq!(f.intrinsics, intrinsics());
+    assert!(f.color.iter().all(|b| *b == 9) && f.color.len() == 144);
+    assert!(f.depth_m.iter().all(|d| (*d - 1.5).abs() < 1e-6) && f.depth_m.len() == 48);
+    assert!(!log(&r).contains(&"software trigger".to_string()), "hardware mode fires nothing");
+    assert_eq!((r.cam.frames_missed(), r.cam.frames_stale()), (0, 0));
+}
+
+#[test]
+fn without_global_timestamps_the_frame_says_it_carries_its_arrival_time() {
+    let mut r = armed(0x0840, false, |o| o.trigger = TriggerChoice::Software);
+    let req = fire(&mut r, 3);
+    std::thread::sleep(Duration::from_millis(25)); // the frameset arrives 21 ms after the trigger
+    r.steps.send(Step::Frames(frameset(&r, req.fired_ns + 1_000_000, 1, false))).expect("send");
+    let f = next_frame(&mut r, Duration::from_secs(2)).expect("healthy").expect("a frame");
+    assert_eq!(f.request.tick, 3);
+    assert_eq!(f.timestamp, TimestampSource::HostArrival);
+    // The arrival, 20 ms after the exposure.
+    let arrival = req.fired_ns + 21_000_000;
+    assert!(f.exposure_ns.abs_diff(arrival) < 5_000_000, "{} vs {arrival}", f.exposure_ns);
+    assert_eq!(log(&r)[0], "mode software triggering");
+    assert_eq!(log(&r).iter().filter(|l| *l == "software trigger").count(), 1);
+}
+
+#[test]
+fn arm_before_configure_is_refused_and_the_right_order_works() {
+    let mut r = rig_with(0x0840, true, |_| {});
+    let e = r.cam.arm_trigger().expect_err("not configured");
+    assert_eq!(e.kind(), ErrorKind::InvalidRequest);
+    assert!(e.message().contains("arm_trigger before configure"), "{e}");
+    let e = r.cam.trigger(CaptureRequest { tick: 1, fired_ns: 1 }).expect_err("not armed");
+    assert_eq!(e.kind(), ErrorKind::InvalidRequest);
+    assert_eq!(r.cam.configure(&config()), Ok(intrinsics()));
+    r.cam.arm_trigger().expect("arm after configure");
+    let e = r.cam.configure(&config()).expect_err("streams are running");
+    assert_eq!(e.kind(), ErrorKind::InvalidRequest);
+    // A camera still healthy after the refusals.
+    assert_eq!(r.cam.poll_frame(), Ok(None));
+}
+
+#[test]
+fn the_305g_is_never_software_triggered_even_though_the_sdk_advertises_it() {
+    let mut r = rig_with(0x0842, true, |o| o.trigger = TriggerChoice::Software);
+    r.cam.configure(&config()).expect("configure");
+    let e = r.cam.arm_trigger().expect_err("undocumented mode");
+    assert_eq!(e.kind(), ErrorKind::InvalidRequest);
+    assert!(e.message().contains("Gemini 305g"), "{e}");
+    assert!(log(&r).is_empty(), "nothing was set on the camera: {:?}", log(&r));
+}
+
+#[test]
+fn a_frame_older_than_its_trigger_is_stale_and_the_trigger_is_missed_not_a_fault() {
+    let mut r = armed(0x0840, true, |_| {});
+    std::thread::sleep(Duration::from_millis(10)); // the controller clock starts at 0
+    let first = fire(&mut r, 1);
+    // Exposed 5 ms BEFORE the trigger fired: not this trigger's frame.
+    r.steps.send(Step::Frames(frameset(&r, first.fired_ns - 5_000_000, 1, true))).expect("send");
+    let end = Instant::now() + Duration::from_secs(5);
+    while r.cam.frames_missed() == 0 && Instant::now() < end {
+        assert_eq!(r.cam.poll_frame(), Ok(None), "no frame for trigger 1, and no fault");
+        std::thread::sleep(Duration::from_millis(2));
+    }
+    assert_eq!(r.cam.frames_stale(), 1);
+    assert_eq!(r.cam.frames_missed(), 1, "trigger 1 expired after frame_timeout");
+    // The camera goes on: the next trigger gets its frame.
+    let second = fire(&mut r, 2);
+    r.steps.send(Step::Frames(frameset(&r, second.fired_ns + 500_000, 2, true))).expect("send");
+    let f = next_frame(&mut r, Duration::from_secs(2)).expect("healthy").expect("a frame");
+    assert_eq!((f.request, f.color[0]), (second, 2));
+}
+
+#[test]
+fn a_frame_pairs_with_its_own_trigger_when_an_earlier_one_was_missed() {
+    let mut r = armed(0x0840, true, |o| o.frame_timeout = Duration::from_secs(5));
+    let _lost = fire(&mut r, 10);
+    std::thread::sleep(Duration::from_millis(3));
+    let second = fire(&mut r, 11);
+    r.steps.send(Step::Frames(frameset(&r, second.fired_ns + 100_000, 11, true))).expect("send");
+    let f = next_frame(&mut r, Duration::from_secs(2)).expect("healthy").expect("a frame");
+    assert_eq!(f.request.tick, 11, "paired by timestamp, not by order");
+    assert_eq!(r.cam.frames_missed(), 1);
+}
+
+#[test]
+fn triggers_answered_by_nothing_trip_the_camera_after_the_limit() {
+    let mut r = armed(0x0842, true, |o| o.max_consecutive_missed = 2);
+    fire(&mut r, 1);
+    fire(&mut r, 2);
+    let end = Instant::now() + Duration::from_secs(2);
+    let e = loop {
+        match r.cam.poll_frame() {
+            Err(e) => break e,
+            Ok(_) if Instant::now() > end => panic!("two missed triggers must trip the camera"),
+            Ok(_) => std::thread::sleep(Duration::from_millis(2)),
+        }
+    };
+    assert_eq!(e.kind(), ErrorKind::DeviceFault);
+    let detail = r.cam.fault_detail().expect("detail").message().to_string();
+    assert!(detail.contains("answered none of the last 2 triggers"), "{detail}");
+    assert!(detail.contains("trigger box's camera line"), "{detail}");
+    // Sticky: later triggers are refused with the same kind.
+    let e = r.cam.trigger(CaptureRequest { tick: 3, fired_ns: 0 }).expect_err("tripped");
+    assert_eq!(e.kind(), ErrorKind::DeviceFault);
+}
+
+#[test]
+fn a_full_capture_queue_is_busy_not_a_fault() {
+    let mut r = armed(0x0840, true, |o| o.trigger_queue = 1);
+    r.steps.send(Step::Stall(Duration::from_millis(500))).expect("send");
+    let end = Instant::now() + Duration::from_secs(5);
+    while !log(&r).contains(&"stalling".to_string()) {
+        assert!(Instant::now() < end, "the worker never took the stall");
+        std::thread::sleep(Duration::from_millis(1));
+    }
+    fire(&mut r, 1);
+    let e =
+        r.cam.trigger(CaptureRequest { tick: 2, fired_ns: r.clock.now_ns() }).expect_err("full");
+    assert_eq!(e.kind(), ErrorKind::Timeout, "busy, as the tick understands it: {e}");
+    assert_eq!(r.cam.poll_frame(), Ok(None), "the camera still works");
+}
+
+#[test]
+fn refused_metadata_is_counted_and_named_when_the_camera_trips() {
+    let mut r = armed(0x0840, true, |o| o.max_consecutive_missed = 1);
+    let req = fire(&mut r, 1);
+    let mut bad = frameset(&r, req.fired_ns + 100_000, 1, true);
+    if let Some(d) = bad.depth.as_mut() {
+        d.meta.width = 4; // depth not aligned to colour
+    }
+    r.steps.send(Step::Frames(bad)).expect("send");
+    let e = next_frame(&mut r, Duration::from_secs(2)).expect_err("trips after the miss");
+    assert_eq!(e.kind(), ErrorKind::DeviceFault);
+    assert_eq!(r.cam.frames_refused(), 1);
+    let detail = r.cam.fault_detail().expect("detail").message().to_string();
+    assert!(detail.contains("not aligned to colour 8x6"), "{detail}");
+}
+
+#[test]
+fn an_unplugged_camera_is_disconnected() {
+    let mut r = armed(0x0840, true, |_| {});
+    fire(&mut r, 1);
+    let gone = OrbbecError::new(
+        ErrorKind::Disconnected,
+        "Orbbec camera: waiting for a frameset: unplugged",
+    );
+    r.steps.send(Step::Fail(gone)).expect("send");
+    let e = next_frame(&mut r, Duration::from_secs(2)).expect_err("unplugged");
+    assert_eq!(e.kind(), ErrorKind::Disconnected);
+    assert!(r.cam.fault_detail().expect("detail").message().contains("unplugged"));
+}
