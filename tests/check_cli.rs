@@ -56,6 +56,10 @@ data = open(os.path.join(out, "safe.npz"), "rb").read()
 open(os.path.join(out, "truncated.npz"), "wb").write(data[: len(data) // 2])
 open(os.path.join(out, "not_zip.npz"), "w").write("qpos,t\n0,0\n")
 
+# Joint 4 held at -0.10 rad (arm upright, joint 1 sweeping 0.1 rad): inside the first xArm7s'
+# table less the 0.05 rad margin (-0.142), outside the current arms' (-0.055).
+j4 = np.tile([0.0, -0.4, 0.0, -0.10, 0.0, 1.0, 0.0], (21, 1)); j4[:, 0] = 0.1 * np.sin(np.pi * t / 4.0) ** 2
+save("joint4_minus_0.10.npz", qpos=j4, t=t)
 # Joint 4 pushed below its lower limit (-0.19 rad) in the middle.
 bq = q.copy(); bq[8:13, 3] = -0.3; save("joint4_low.npz", qpos=bq, t=t)
 # One rest-to-rest move of joint 1 by 0.5 rad in 1 s: 0.94 rad/s peak, inside the velocity limit,
@@ -188,6 +192,46 @@ fn damaged_files_are_refused() {
 #[test]
 fn a_joint_beyond_its_limit_is_unsafe() {
     expect("joint4_low.npz", &[], 3, &["UNSAFE", "joint 4", "allowed range"]);
+}
+
+#[test]
+fn the_labs_joint_table_decides_joint_4_at_minus_0_10() {
+    // Current xArm7s (the default table) stop joint 4 at -0.10472 rad: with the 0.05 rad margin
+    // -0.10 is refused, naming the joint and the table.
+    expect(
+        "joint4_minus_0.10.npz",
+        &[],
+        3,
+        &["UNSAFE", "joint 4", "xarm7-current", "table xarm7-current"],
+    );
+    let o = check("joint4_minus_0.10.npz", &["--json"]);
+    let v: serde_json::Value = serde_json::from_str(o.text.trim()).expect("one JSON object");
+    assert_eq!(v["joint_table"], "xarm7-current");
+    assert_eq!(v["violations"].as_array().map(Vec::len), Some(1), "{v}");
+    assert_eq!(v["violations"][0]["joint"], 4);
+    // The first arms' table allows it.
+    let cfg = fixtures().join("legacy.toml");
+    std::fs::write(&cfg, "[arm]\njoint_table = \"xarm7-legacy\"\n").expect("write");
+    let cfg = cfg.display().to_string();
+    expect("joint4_minus_0.10.npz", &["--config", &cfg], 0, &["SAFE", "table xarm7-legacy"]);
+    // A name that is no table is bad input.
+    let bad = fixtures().join("no_table.toml");
+    std::fs::write(&bad, "[arm]\njoint_table = \"xarm6\"\n").expect("write");
+    let bad = bad.display().to_string();
+    expect("joint4_minus_0.10.npz", &["--config", &bad], 2, &["xarm7-current", "xarm7-legacy"]);
+}
+
+#[test]
+fn a_tcp_faster_than_the_lab_allows_is_unsafe() {
+    let cfg = fixtures().join("slow_tcp.toml");
+    std::fs::write(&cfg, "[limits]\ntcp_speed_m_s = 0.01\n").expect("write");
+    let cfg = cfg.display().to_string();
+    expect("safe.npz", &["--config", &cfg], 3, &["UNSAFE", "TCP linear speed", "error 60"]);
+    let o = check("safe.npz", &["--json"]);
+    let v: serde_json::Value = serde_json::from_str(o.text.trim()).expect("one JSON object");
+    let peak = v["tcp_speed"]["peak_m_s"].as_f64().expect("peak");
+    assert!(peak > 0.01 && peak < 1.0, "{v}");
+    assert_eq!(v["tcp_speed"]["limit_m_s"], 1.0);
 }
 
 #[test]

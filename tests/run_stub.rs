@@ -86,6 +86,20 @@ fn a_numpy_trajectory_plays_to_the_end_on_the_table_and_the_arm_ends_on_the_last
     let run = run_with(&[]);
     assert_eq!(code(&run.out), 0, "{}", text(&run.out));
     assert!(text(&run.out).contains("settled on the last waypoint"), "{}", text(&run.out));
+    // On connect the run says who the arm is and which joint table it checks against: the stub
+    // is a current xArm7.
+    let all = text(&run.out);
+    let identity = all.lines().find(|l| l.starts_with("arm: serial ")).unwrap_or_default();
+    assert!(identity.starts_with("arm: serial XS1305"), "{all}");
+    assert!(
+        identity.ends_with(
+            ", firmware v2.5.0, joint table xarm7-current (lab: xarm7-current; checking against \
+             xarm7-current)"
+        ),
+        "{all}"
+    );
+    // A completed run has no stop to confirm.
+    assert!(!text(&run.out).contains("box stop"), "{}", text(&run.out));
 
     let rec = read_recording(&run.mcap).expect("readable recording");
     let traj = npz::load(&run.traj).expect("load").trajectory;
@@ -162,12 +176,15 @@ fn fault_case_with(
 
 #[test]
 fn estop_holds_and_exits_4() {
-    fault_case("estop", 4, "e-stop", false);
+    let all = fault_case("estop", 4, "e-stop", false);
+    // The hold only sent the stop; the supervisor saw a report with state 4 after the loop.
+    assert!(all.contains("box stop confirmed"), "{all}");
 }
 
 #[test]
 fn door_open_stops_and_exits_4() {
-    fault_case("door-open", 4, "door-open", true);
+    let all = fault_case("door-open", 4, "door-open", true);
+    assert!(all.contains("box stop confirmed"), "{all}");
 }
 
 #[test]
@@ -187,7 +204,9 @@ fn deviation_beyond_the_threshold_stops_and_exits_4() {
 
 #[test]
 fn a_dropped_connection_holds_and_exits_5() {
-    fault_case("drop-connection", 5, "device-fault", false);
+    let all = fault_case("drop-connection", 5, "device-fault", false);
+    // Nothing can reach the box: the supervisor gives up after 3 s and says so.
+    assert!(all.contains("box stop NOT confirmed"), "{all}");
 }
 
 #[test]
@@ -281,6 +300,55 @@ fn an_orbbec_camera_that_is_not_there_fails_before_anything_moves_with_exit_5() 
     assert_eq!(code(&run.out), 5, "{all}");
     assert!(all.contains("Orbbec"), "{all}");
     assert!(!all.contains("tick "), "nothing moved: {all}");
+}
+
+#[test]
+fn more_than_250_setpoints_a_second_is_refused_for_a_real_arm_and_the_stub() {
+    let dir = tempfile::tempdir().expect("tempdir");
+    let traj = numpy_trajectory(dir.path());
+    let traj = traj.to_str().expect("utf-8");
+    // Refused before anything connects (nothing listens on the arm's port here).
+    let out = hitl(&["run", traj, "--arm", "127.0.0.1", "--yes", "--rate", "300"]);
+    assert_eq!(code(&out), 2, "{}", text(&out));
+    assert!(text(&out).contains("--rate 300 Hz"), "{}", text(&out));
+    assert!(text(&out).contains("at most 250 Hz"), "{}", text(&out));
+    let out = hitl(&["run", traj, "--rate", "250.5", "--plain"]);
+    assert_eq!(code(&out), 2, "{}", text(&out));
+    assert!(text(&out).contains("the stub"), "{}", text(&out));
+}
+
+#[test]
+fn the_connected_arms_joint_table_refuses_what_the_labs_allows() {
+    // A lab that says xarm7-legacy passes joint 4 at -0.10 rad offline; the stub reports a
+    // current xArm7's serial number, so the run refuses on connect, before anything moves.
+    let _one = ONE_AT_A_TIME.lock().unwrap_or_else(|e| e.into_inner());
+    let dir = tempfile::tempdir().expect("tempdir");
+    let traj = dir.path().join("j4.npz");
+    let script = format!(
+        "import numpy as np\n\
+         t = np.linspace(0, 2, 11)\n\
+         q = np.tile([0.0, -0.4, 0.0, -0.10, 0.0, 1.0, 0.0], (11, 1))\n\
+         q[:, 0] = 0.1 * np.sin(np.pi * t / 2) ** 2\n\
+         np.savez(r'{}', qpos=q, t=t)\n",
+        traj.display()
+    );
+    let out = Command::new(env!("HITL_VENV_PYTHON")).arg("-c").arg(&script).output().expect("py");
+    assert!(out.status.success(), "numpy: {}", String::from_utf8_lossy(&out.stderr));
+    let lab = dir.path().join("legacy.toml");
+    std::fs::write(&lab, "[arm]\njoint_table = \"xarm7-legacy\"\n").expect("write");
+    let traj = traj.to_str().expect("utf-8");
+    let lab = lab.to_str().expect("utf-8");
+    let check = hitl(&["check", traj, "--config", lab]);
+    assert_eq!(code(&check), 0, "{}", text(&check));
+    let out =
+        hitl(&["run", traj, "--config", lab, "--camera", "none", "--light", "none", "--plain"]);
+    let all = text(&out);
+    assert_eq!(code(&out), 3, "{all}");
+    assert!(all.contains("(serial XS1305"), "{all}");
+    assert!(all.contains("enforces joint table xarm7-current"), "{all}");
+    assert!(all.contains("joint 4 reaches") && all.contains("joint table xarm7-current"), "{all}");
+    assert!(all.contains("nothing moved"), "{all}");
+    assert!(!all.lines().any(|l| l.starts_with("tick ")), "no tick was played: {all}");
 }
 
 #[test]

@@ -16,7 +16,7 @@
 //! on every arm body), as the box's own gravity compensation does.
 
 use crate::mujoco_plant::StubSceneError;
-use hitl_trajectories::kinematics::{self, CHAIN, DOF, JOINT_LIMITS, LINK_RADII};
+use hitl_trajectories::kinematics::{self, CHAIN, DOF, LINK_RADII};
 use hitl_trajectories::lab::LabConfig;
 use nalgebra::{Isometry3, Point3, UnitQuaternion, Vector3};
 use std::fmt::Write as _;
@@ -436,7 +436,7 @@ fn write_arm(x: &mut String, lab: &LabConfig) {
         );
         indent.push_str("  ");
         let _ = writeln!(x, "{indent}{}", inertial(i));
-        let (lo, hi) = JOINT_LIMITS[i - 1];
+        let (lo, hi) = lab.arm.joint_table.limits()[i - 1];
         let _ = writeln!(
             x,
             "{indent}<joint name=\"{}\" type=\"hinge\" axis=\"0 0 1\" range=\"{}\" armature=\"{}\" damping=\"{}\"/>",

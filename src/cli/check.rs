@@ -132,6 +132,7 @@ fn human(path: &Path, c: &Checked) -> String {
     for w in c.loaded.warnings.iter().chain(&r.warnings) {
         let _ = writeln!(s, "  warning: {w}");
     }
+    let _ = writeln!(s, "  joint limits: table {} (lab config [arm] joint_table)", r.joint_table);
     let _ = writeln!(
         s,
         "  joint  range [rad]        allowed [rad]      |qd| / limit   |qdd| / limit  |jerk| / limit  step [mrad] / limit"
@@ -163,6 +164,12 @@ fn human(path: &Path, c: &Checked) -> String {
             cl.surface, cl.min_m, cl.required_m, cl.capsule, cl.time_s, cl.tick
         );
     }
+    let t = &r.tcp_speed;
+    let _ = writeln!(
+        s,
+        "  TCP linear speed       {:>8.3}  {:>8.3}  {:<9}  {:.3} s (tick {})  [m/s]",
+        t.peak_m_s, t.limit_m_s, t.point, t.time_s, t.tick
+    );
     for v in &r.violations {
         let _ = writeln!(s, "  VIOLATION: {}", v.message);
     }

@@ -6,6 +6,7 @@
 //! - [`motion`]: jerk-limited moves planned with Ruckig (the approach, and stops);
 //! - [`stop`]: the stop planner thread that turns a trip into a Ruckig stop without the tick
 //!   allocating or waiting;
+//! - [`stop_supervisor`]: after a tripped run, repeat the box's stop until a report shows it;
 //! - [`telemetry`]: what the tick hands out (bounded lock-free, never blocking);
 //! - [`tick`]: the real-time loop itself, short and readable top to bottom;
 //! - [`session`]: connect, preflight, open devices, enable, approach, playback, settle, done.
@@ -16,5 +17,6 @@ pub mod progress;
 pub mod session;
 pub mod setpoint;
 pub mod stop;
+pub mod stop_supervisor;
 pub mod telemetry;
 pub mod tick;

@@ -14,7 +14,9 @@ mod clearance;
 
 pub use clearance::{Nearest, Scene, SELF_MARGIN_M};
 
-use crate::kinematics::{camera_pose, link_frames, Joints, DOF, JOINT_LIMITS};
+use crate::joint_table::JointTable;
+use crate::kinematics::{camera_pose, link_frames, Joints, DOF};
+use crate::lab::LabConfig;
 use nalgebra::{Isometry3, Matrix6, SMatrix, SVector, Vector3, Vector6};
 use std::f64::consts::{FRAC_PI_2, PI};
 
@@ -25,6 +27,8 @@ pub type Jacobian = SMatrix<f64, 6, DOF>;
 /// Tuning of the solver. `Default` is what the planner uses.
 #[derive(Debug, Clone, PartialEq)]
 pub struct IkOptions {
+    /// The joint-limit table solutions must stay inside.
+    pub joint_table: JointTable,
     /// Distance kept from every joint limit, radians.
     pub limit_margin_rad: f64,
     /// Position tolerance, metres.
@@ -50,6 +54,7 @@ pub struct IkOptions {
 impl Default for IkOptions {
     fn default() -> Self {
         Self {
+            joint_table: JointTable::default(),
             limit_margin_rad: 0.05,
             pos_tol_m: 1e-10,
             rot_tol_rad: 1e-10,
@@ -60,6 +65,17 @@ impl Default for IkOptions {
             clearance_weight: 4.0,
             max_iter_step_rad: 0.25,
             max_waypoint_step_rad: 0.25,
+        }
+    }
+}
+
+impl IkOptions {
+    /// The defaults, inside `lab`'s joint table and joint-limit margin.
+    pub fn for_lab(lab: &LabConfig) -> Self {
+        Self {
+            joint_table: lab.arm.joint_table,
+            limit_margin_rad: lab.margins.joint_limit_rad,
+            ..Self::default()
         }
     }
 }
@@ -89,10 +105,10 @@ pub fn pose_error(target: &Isometry3<f64>, current: &Isometry3<f64>) -> Vector6<
 
 /// Centres and half-ranges of the joints for the limit cost. The unlimited (+-2 pi) joints are
 /// pulled weakly toward 0 so they never wind up toward their stops.
-fn limit_cost_gradient(q: &Joints) -> SVector<f64, DOF> {
+fn limit_cost_gradient(q: &Joints, limits: &[(f64, f64); DOF]) -> SVector<f64, DOF> {
     let mut g = SVector::<f64, DOF>::zeros();
     for i in 0..DOF {
-        let (lo, hi) = JOINT_LIMITS[i];
+        let (lo, hi) = limits[i];
         let mid = 0.5 * (lo + hi);
         let half = 0.5 * (hi - lo);
         let weight = if hi - lo > 3.0 * PI { 0.1 } else { 1.0 };
@@ -112,8 +128,9 @@ const WRIST_WIDTH_RAD: f64 = 0.5;
 /// The secondary cost's value: joint-limit cost plus weighted obstacle penalty.
 pub fn secondary_cost(q: &Joints, scene: Option<&Scene>, opts: &IkOptions) -> f64 {
     let mut c = 0.0;
+    let limits = opts.joint_table.limits();
     for i in 0..DOF {
-        let (lo, hi) = JOINT_LIMITS[i];
+        let (lo, hi) = limits[i];
         let mid = 0.5 * (lo + hi);
         let half = 0.5 * (hi - lo);
         let weight = if hi - lo > 3.0 * PI { 0.1 } else { 1.0 };
@@ -127,7 +144,7 @@ pub fn secondary_cost(q: &Joints, scene: Option<&Scene>, opts: &IkOptions) -> f6
 }
 
 fn secondary_gradient(q: &Joints, scene: Option<&Scene>, opts: &IkOptions) -> SVector<f64, DOF> {
-    let mut g = limit_cost_gradient(q);
+    let mut g = limit_cost_gradient(q, &opts.joint_table.limits());
     if let Some(s) = scene {
         let p0 = s.penalty(q, opts.activation_m);
         if p0 > 0.0 {
@@ -152,9 +169,9 @@ pub struct IkSolution {
     pub converged: bool,
 }
 
-fn clamp_to_limits(q: &mut Joints, margin: f64) {
+fn clamp_to_limits(q: &mut Joints, limits: &[(f64, f64); DOF], margin: f64) {
     for i in 0..DOF {
-        let (lo, hi) = JOINT_LIMITS[i];
+        let (lo, hi) = limits[i];
         q[i] = q[i].clamp(lo + margin, hi - margin);
     }
 }
@@ -168,7 +185,7 @@ pub fn solve(
     opts: &IkOptions,
 ) -> IkSolution {
     let mut q = *seed;
-    clamp_to_limits(&mut q, opts.limit_margin_rad);
+    clamp_to_limits(&mut q, &opts.joint_table.limits(), opts.limit_margin_rad);
     for it in 0..opts.max_iters {
         let (cam, j) = camera_jacobian(&q, mount);
         let e = pose_error(target, &cam);
@@ -205,7 +222,7 @@ pub fn solve(
         for i in 0..DOF {
             q[i] += dq[i];
         }
-        clamp_to_limits(&mut q, opts.limit_margin_rad);
+        clamp_to_limits(&mut q, &opts.joint_table.limits(), opts.limit_margin_rad);
     }
     let (cam, _) = camera_jacobian(&q, mount);
     let e = pose_error(target, &cam);

@@ -62,10 +62,21 @@ impl JointTable {
     }
 
     /// (lower, upper) in radians, joint 1 first.
-    pub fn limits(self) -> [(f64, f64); DOF] {
+    pub const fn limits(self) -> [(f64, f64); DOF] {
         match self {
             JointTable::Xarm7Current => CURRENT,
             JointTable::Xarm7Legacy => LEGACY,
+        }
+    }
+
+    /// The tighter of two tables: what an arm enforcing `other` allows and the lab's `self` too.
+    /// The current table lies inside the legacy one on every joint (tested), so the tighter one
+    /// is their intersection.
+    pub fn tighter(self, other: JointTable) -> JointTable {
+        if self == JointTable::Xarm7Current || other == JointTable::Xarm7Current {
+            JointTable::Xarm7Current
+        } else {
+            JointTable::Xarm7Legacy
         }
     }
 
@@ -118,6 +129,24 @@ mod tests {
             assert!(c.0 >= l.0 && c.1 <= l.1, "{c:?} not inside {l:?}");
         }
         assert_eq!(JointTable::Xarm7Current.limits()[3].0, -0.10472);
+    }
+
+    #[test]
+    fn the_tighter_table_is_the_current_one_whenever_either_is() {
+        use JointTable::*;
+        assert_eq!(Xarm7Legacy.tighter(Xarm7Legacy), Xarm7Legacy);
+        assert_eq!(Xarm7Legacy.tighter(Xarm7Current), Xarm7Current);
+        assert_eq!(Xarm7Current.tighter(Xarm7Legacy), Xarm7Current);
+        assert_eq!(Xarm7Current.tighter(Xarm7Current), Xarm7Current);
+    }
+
+    #[test]
+    fn the_tables_are_the_sdks() {
+        // x_config.py, XARM7_X4 and XARM7_X4_1305: J2 and J4 differ, J6 is shared.
+        let (c, l) = (JointTable::Xarm7Current.limits(), JointTable::Xarm7Legacy.limits());
+        assert_eq!((c[1], c[3]), ((-2.042035, 2.024581), (-0.10472, 3.92699)));
+        assert_eq!((l[1], l[3]), ((-2.059488, 2.094395), (-0.191986, 3.92699)));
+        assert_eq!((c[5], l[5]), ((-1.692969, PI), (-1.692969, PI)));
     }
 
     #[test]

@@ -7,6 +7,7 @@
 //! its z axis pointing down.
 
 use crate::geometry::Capsule;
+use crate::joint_table::JointTable;
 use nalgebra::{Isometry3, Point3, Translation3, UnitQuaternion, Vector3};
 use std::f64::consts::{FRAC_PI_2, PI};
 
@@ -27,16 +28,10 @@ pub const CHAIN: [([f64; 3], f64); DOF] = [
     ([0.076, 0.097, 0.0], -FRAC_PI_2),
 ];
 
-/// xArm7 joint limits (radians), from the official SDK's configuration.
-pub const JOINT_LIMITS: [(f64, f64); DOF] = [
-    (-2.0 * PI, 2.0 * PI),
-    (-2.059488, 2.094395),
-    (-2.0 * PI, 2.0 * PI),
-    (-0.191986, 3.92699),
-    (-2.0 * PI, 2.0 * PI),
-    (-1.692969, PI),
-    (-2.0 * PI, 2.0 * PI),
-];
+/// The widest xArm7 joint-limit table (the first arms'). Nothing that checks or plans motion
+/// may use it: the lab's [`crate::joint_table::JointTable`] (or the connected arm's) decides.
+/// Kept for the stub's box model, which enforces the widest range a box can have.
+pub const JOINT_LIMITS: [(f64, f64); DOF] = JointTable::Xarm7Legacy.limits();
 
 /// The xArm7's published maximum joint speed, 180 deg/s.
 pub const MAX_JOINT_SPEED: f64 = PI;
@@ -71,12 +66,17 @@ pub fn camera_pose(q: &Joints, mount: &Isometry3<f64>) -> Isometry3<f64> {
     flange_pose(q) * mount
 }
 
-/// The index of a joint that is outside its limits shrunk by `margin`, with its value.
-pub fn first_joint_beyond_limits(q: &Joints, margin: f64) -> Option<(usize, f64)> {
+/// The index of a joint that is outside `limits` (a [`JointTable`]'s) shrunk by `margin`, with
+/// its value.
+pub fn first_joint_beyond_limits(
+    q: &Joints,
+    limits: &[(f64, f64); DOF],
+    margin: f64,
+) -> Option<(usize, f64)> {
     q.iter()
         .enumerate()
         .find(|(i, v)| {
-            let (lo, hi) = JOINT_LIMITS[*i];
+            let (lo, hi) = limits[*i];
             !(**v >= lo + margin && **v <= hi - margin)
         })
         .map(|(i, v)| (i, *v))
@@ -162,12 +162,19 @@ mod tests {
 
     #[test]
     fn limits_with_margin() {
+        let (current, legacy) =
+            (JointTable::Xarm7Current.limits(), JointTable::Xarm7Legacy.limits());
         let mut q = [0.0; DOF];
-        assert_eq!(first_joint_beyond_limits(&q, 0.05), None);
+        assert_eq!(first_joint_beyond_limits(&q, &current, 0.05), None);
         q[3] = -0.18;
-        assert_eq!(first_joint_beyond_limits(&q, 0.05), Some((3, -0.18)));
+        assert_eq!(first_joint_beyond_limits(&q, &legacy, 0.05), Some((3, -0.18)));
+        // J4 at -0.10 rad: inside the first arms' table, outside the current one.
+        q[3] = -0.10;
+        assert_eq!(first_joint_beyond_limits(&q, &legacy, 0.05), None);
+        assert_eq!(first_joint_beyond_limits(&q, &current, 0.0), None);
+        assert_eq!(first_joint_beyond_limits(&q, &current, 0.05), Some((3, -0.10)));
         q[3] = 0.5;
         q[1] = f64::NAN;
-        assert_eq!(first_joint_beyond_limits(&q, 0.0).map(|x| x.0), Some(1));
+        assert_eq!(first_joint_beyond_limits(&q, &current, 0.0).map(|x| x.0), Some(1));
     }
 }

@@ -6,6 +6,7 @@
 //! arm base sits in the lab at `arm.base_in_lab_m` turned by `arm.base_yaw_deg` about z.
 
 use crate::geometry::Capsule;
+use crate::joint_table::JointTable;
 use crate::kinematics::{CameraBody, DOF, MAX_JOINT_SPEED};
 use nalgebra::{Isometry3, Point3, Translation3, UnitQuaternion, Vector3};
 use serde::{Deserialize, Serialize};
@@ -50,7 +51,7 @@ impl Default for Enclosure {
     }
 }
 
-/// Where the arm's base sits in the lab.
+/// The arm: where its base sits in the lab, and which joint-limit table it enforces.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(default, deny_unknown_fields)]
 pub struct ArmPlacement {
@@ -58,11 +59,19 @@ pub struct ArmPlacement {
     pub base_in_lab_m: [f64; 3],
     /// Base rotation about the lab's z axis, degrees. Default 0 (base x along the lab's x).
     pub base_yaw_deg: f64,
+    /// The xArm7 joint-limit table offline checks and plans use: `xarm7-current` (default, the
+    /// tighter one: arms whose serial digits [2:6] are 1305..8499) or `xarm7-legacy` (the first
+    /// arms). On connect the arm's own table, from its serial number, is checked too.
+    pub joint_table: JointTable,
 }
 
 impl Default for ArmPlacement {
     fn default() -> Self {
-        Self { base_in_lab_m: [0.9, 0.6095, 0.0], base_yaw_deg: 0.0 }
+        Self {
+            base_in_lab_m: [0.9, 0.6095, 0.0],
+            base_yaw_deg: 0.0,
+            joint_table: JointTable::default(),
+        }
     }
 }
 
@@ -158,6 +167,10 @@ impl Default for Margins {
     }
 }
 
+/// The TCP linear speed above which an xArm control box (firmware 2.3.0 on) raises error 60 in
+/// servo_j: 1.2 x its 1000 mm/s TCP speed limit, m/s.
+pub const SERVO_J_TCP_SPEED_LIMIT: f64 = 1.2;
+
 /// Per-joint kinematic limits for playback. Defaults are well below the xArm7's 180 deg/s.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(default, deny_unknown_fields)]
@@ -171,6 +184,11 @@ pub struct JointLimits {
     /// Largest change of any joint between two setpoints, radians. Default 0.01: servo mode
     /// runs each step at full speed, so a large step is a violent motion.
     pub max_step_rad: f64,
+    /// Peak linear speed of the TCP (flange origin, and the camera's optical centre), m/s, from
+    /// forward kinematics between successive setpoints. Default 1.0: in servo_j the control box
+    /// (firmware 2.3.0 on) raises error 60 above 1.2 x its 1000 mm/s TCP speed, 1.2 m/s
+    /// (docs/preflight.md gives the sources); at most 1.2.
+    pub tcp_speed_m_s: f64,
     /// Limits of the slow approach from the arm's pose to the first waypoint: speed (rad/s).
     pub approach_velocity_rad_s: f64,
     /// Approach acceleration, rad/s^2.
@@ -186,6 +204,7 @@ impl Default for JointLimits {
             acceleration_rad_s2: [4.0; DOF],
             jerk_rad_s3: [60.0; DOF],
             max_step_rad: 0.01,
+            tcp_speed_m_s: 1.0,
             approach_velocity_rad_s: 0.3,
             approach_acceleration_rad_s2: 0.8,
             approach_jerk_rad_s3: 8.0,
@@ -308,6 +327,15 @@ impl LabConfig {
         if let Some((name, v)) = non_negative.iter().find(|(_, v)| !(*v >= 0.0 && v.is_finite())) {
             return bad(format!("{name} = {v} must be zero or positive"));
         }
+        if !(self.limits.tcp_speed_m_s > 0.0
+            && self.limits.tcp_speed_m_s <= SERVO_J_TCP_SPEED_LIMIT)
+        {
+            return bad(format!(
+                "limits.tcp_speed_m_s = {} must be in (0, {SERVO_J_TCP_SPEED_LIMIT}] (the control \
+                 box's servo_j TCP speed limit, error 60)",
+                self.limits.tcp_speed_m_s
+            ));
+        }
         if self.limits.approach_velocity_rad_s > MAX_JOINT_SPEED {
             return bad("limits.approach_velocity_rad_s exceeds the xArm7's 180 deg/s".into());
         }
@@ -398,6 +426,17 @@ mod tests {
         let e =
             LabConfig::from_toml("[arm]\nbase_in_lab_m = [5.0, 0.5, 0.0]\n").expect_err("refused");
         assert!(e.to_string().contains("outside the enclosure"), "{e}");
+        let e = LabConfig::from_toml("[limits]\ntcp_speed_m_s = 1.5\n").expect_err("refused");
+        assert!(e.to_string().contains("tcp_speed_m_s"), "{e}");
+        let e = LabConfig::from_toml("[arm]\njoint_table = \"xarm7\"\n").expect_err("refused");
+        assert!(e.to_string().contains("xarm7-current"), "{e}");
+    }
+
+    #[test]
+    fn the_joint_table_defaults_to_the_current_one() {
+        assert_eq!(LabConfig::default().arm.joint_table, JointTable::Xarm7Current);
+        let c = LabConfig::from_toml("[arm]\njoint_table = \"xarm7-legacy\"\n").expect("legacy");
+        assert_eq!(c.arm.joint_table, JointTable::Xarm7Legacy);
     }
 
     #[test]

@@ -338,7 +338,7 @@ pub fn solve_path(
 ) -> Result<ik::Track, PlanError> {
     let scene = Scene::from_lab(lab);
     let mount = lab.camera_mount();
-    let opts = IkOptions { limit_margin_rad: lab.margins.joint_limit_rad, ..IkOptions::default() };
+    let opts = IkOptions::for_lab(lab);
     let first = ik::solve_from_seeds(&path.cam_pose[0], &mount, Some(&scene), &opts, TRACKED_SEEDS);
     let mut best: Option<ik::Track> = None;
     let total = first.len();

@@ -2,10 +2,13 @@
 //! moves. Checked at every setpoint tick of the [`SetpointTable`] (what the arm will actually be
 //! sent, spline swings between waypoints included):
 //!
-//! - joint positions inside the xArm7 limits shrunk by `margins.joint_limit_rad`;
+//! - joint positions inside the lab's xArm7 joint-limit table (`arm.joint_table`, named in the
+//!   message) shrunk by `margins.joint_limit_rad`;
 //! - peak |velocity|, |acceleration|, |jerk| per joint against `limits`;
 //! - per-tick step (largest joint change between two setpoints) against `limits.max_step_rad`
 //!   (servo mode runs each step at full speed);
+//! - peak linear speed of the TCP (flange origin and camera optical centre, forward kinematics
+//!   differenced between setpoints) against `limits.tcp_speed_m_s` (the box's servo_j error 60);
 //! - clearance of every arm capsule (links, flange, camera body) to each enclosure face (x-, x+,
 //!   y-, y+, floor, ceiling), keeping `margins.wall_m`, and to each keep-out (target, tripod,
 //!   light), keeping `margins.keepout_m`;
@@ -18,7 +21,7 @@
 //! See `docs/preflight.md`.
 
 use crate::geometry::Capsule;
-use crate::kinematics::{self, CAPSULE_NAMES, DOF, JOINT_LIMITS};
+use crate::kinematics::{self, CAPSULE_NAMES, DOF};
 use crate::lab::LabConfig;
 use crate::timing::SetpointTable;
 use crate::trajectory::Trajectory;
@@ -72,6 +75,19 @@ pub struct Clearance {
     pub capsule: String,
 }
 
+/// The peak linear speed of the TCP over the whole table.
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct TcpSpeed {
+    /// Peak speed, m/s (of the faster point, see `point`).
+    pub peak_m_s: f64,
+    /// Which point reached it: `flange` or `camera` (the optical centre).
+    pub point: String,
+    pub tick: usize,
+    pub time_s: f64,
+    /// `limits.tcp_speed_m_s`.
+    pub limit_m_s: f64,
+}
+
 /// What a violation is about.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize)]
 #[serde(rename_all = "snake_case")]
@@ -81,6 +97,7 @@ pub enum Rule {
     Acceleration,
     Jerk,
     Step,
+    TcpSpeed,
     Wall,
     KeepOut,
     CameraTargetDistance,
@@ -114,8 +131,11 @@ pub struct PreflightReport {
     pub rate_hz: f64,
     pub speed_scale: f64,
     pub captures: usize,
+    /// The xArm7 joint-limit table the joint positions were checked against.
+    pub joint_table: String,
     pub joints: Vec<JointPeaks>,
     pub clearances: Vec<Clearance>,
+    pub tcp_speed: TcpSpeed,
     pub violations: Vec<Violation>,
     /// Things worth knowing that are not unsafe (e.g. two captures falling on one tick).
     pub warnings: Vec<String>,
@@ -157,8 +177,10 @@ pub fn check(traj: &Trajectory, table: &SetpointTable, lab: &LabConfig) -> Prefl
     // Joint rules.
     let mut joints = Vec::with_capacity(DOF);
     let margin = lab.margins.joint_limit_rad;
+    let joint_table = lab.arm.joint_table;
+    let table_limits = joint_table.limits();
     for j in 0..DOF {
-        let (lo, hi) = (JOINT_LIMITS[j].0 + margin, JOINT_LIMITS[j].1 - margin);
+        let (lo, hi) = (table_limits[j].0 + margin, table_limits[j].1 - margin);
         let (mut min, mut max) = ((f64::INFINITY, 0), (f64::NEG_INFINITY, 0));
         let mut worst_out = (0.0f64, 0usize);
         let peak = |x: &[[f64; DOF]]| {
@@ -213,8 +235,8 @@ pub fn check(traj: &Trajectory, table: &SetpointTable, lab: &LabConfig) -> Prefl
                 Rule::JointLimit,
                 format!(
                     "joint {joint} reaches {:.4} rad at tick {k} ({:.3} s, near waypoint {}): \
-                     outside its allowed range [{lo:.4}, {hi:.4}] rad (xArm7 limits less a \
-                     {margin} rad margin)",
+                     outside its allowed range [{lo:.4}, {hi:.4}] rad (joint table \
+                     {joint_table} less a {margin} rad margin)",
                     table.q[k][j],
                     table.time_of(k),
                     waypoint_of(k)
@@ -281,7 +303,24 @@ pub fn check(traj: &Trajectory, table: &SetpointTable, lab: &LabConfig) -> Prefl
     let mut faces = [MinTrack::NONE; 6];
     let mut keep = [MinTrack::NONE; 3];
     let mut camera = MinTrack::NONE;
+    // TCP speed: (peak, tick, point 0 flange / 1 camera) and the previous tick's positions.
+    let mut tcp = (0.0f64, 0usize, 0usize);
+    let mut previous: Option<[Point3<f64>; 2]> = None;
     for (k, q) in table.q.iter().enumerate() {
+        let flange = kinematics::flange_pose(q);
+        let points = [
+            Point3::from(flange.translation.vector),
+            Point3::from((flange * mount).translation.vector),
+        ];
+        if let Some(prev) = previous {
+            for (i, (p, before)) in points.iter().zip(prev).enumerate() {
+                let v = (p - before).norm() * table.rate_hz;
+                if v.is_nan() || v > tcp.0 {
+                    tcp = (v, k, i);
+                }
+            }
+        }
+        previous = Some(points);
         let capsules = kinematics::arm_capsules(q, &mount, &body);
         for (c, cap) in capsules.iter().enumerate() {
             let in_lab: Capsule = cap.transformed(&base_in_lab);
@@ -294,8 +333,37 @@ pub fn check(traj: &Trajectory, table: &SetpointTable, lab: &LabConfig) -> Prefl
                 keep[i].offer(cap.distance_to(ko), k, c);
             }
         }
-        let optical = Point3::from(kinematics::camera_pose(q, &mount).translation.vector);
-        camera.offer((optical - target).norm(), k, CAPSULE_NAMES.len() - 1);
+        camera.offer((points[1] - target).norm(), k, CAPSULE_NAMES.len() - 1);
+    }
+    let tcp_speed = TcpSpeed {
+        peak_m_s: tcp.0,
+        point: ["flange", "camera"][tcp.2].to_string(),
+        tick: tcp.1,
+        time_s: table.time_of(tcp.1),
+        limit_m_s: lab.limits.tcp_speed_m_s,
+    };
+    if tcp_speed.peak_m_s.is_nan() || tcp_speed.peak_m_s > tcp_speed.limit_m_s {
+        let k = tcp_speed.tick;
+        violations.push(Violation {
+            rule: Rule::TcpSpeed,
+            message: format!(
+                "TCP linear speed {:.3} m/s ({}) at tick {k} ({:.3} s, near waypoint {}) exceeds \
+                 limits.tcp_speed_m_s = {} m/s (the control box stops servo_j with error 60 \
+                 above {} m/s)",
+                tcp_speed.peak_m_s,
+                tcp_speed.point,
+                tcp_speed.time_s,
+                waypoint_of(k),
+                tcp_speed.limit_m_s,
+                crate::lab::SERVO_J_TCP_SPEED_LIMIT
+            ),
+            tick: k,
+            time_s: tcp_speed.time_s,
+            waypoint: waypoint_of(k),
+            joint: None,
+            surface: None,
+            capsule: Some(tcp_speed.point.clone()),
+        });
     }
     let mut clearances = Vec::with_capacity(10);
     let mut add = |surface: String, track: MinTrack, required: f64, rule: Rule| {
@@ -367,8 +435,10 @@ pub fn check(traj: &Trajectory, table: &SetpointTable, lab: &LabConfig) -> Prefl
         rate_hz: table.rate_hz,
         speed_scale: table.speed_scale,
         captures: traj.capture_count(),
+        joint_table: joint_table.name().to_string(),
         joints,
         clearances,
+        tcp_speed,
         violations,
         warnings,
     }
@@ -418,7 +488,7 @@ mod tests {
     #[test]
     fn a_joint_beyond_its_limit_is_named() {
         let mut traj = comfortable(11, 0.2, 0.05);
-        // Joint 4's lower limit is -0.19 rad: push the middle waypoints below it.
+        // Joint 4's lower limit is -0.10 rad (current arms): push the middle waypoints below it.
         for q in &mut traj.qpos[4..7] {
             q[3] = -0.3;
         }
@@ -426,10 +496,32 @@ mod tests {
         let v = r.violations.iter().find(|v| v.rule == Rule::JointLimit).expect("limit");
         assert_eq!(v.joint, Some(4));
         assert!(
-            v.message.contains("joint 4") && v.message.contains("allowed range"),
+            v.message.contains("joint 4")
+                && v.message.contains("allowed range")
+                && v.message.contains("xarm7-current"),
             "{}",
             v.message
         );
+        assert_eq!(r.joint_table, "xarm7-current");
+    }
+
+    #[test]
+    fn the_labs_joint_table_decides() {
+        // Joint 4 held at -0.10 rad: inside the first arms' table less the default 0.05 rad
+        // margin (-0.142), outside the current one's (-0.055).
+        let mut traj = comfortable(11, 0.2, 0.0);
+        for q in &mut traj.qpos {
+            q[3] = -0.10;
+        }
+        let mut lab = LabConfig::default();
+        let r = run(&traj, &lab, 250.0);
+        let v = r.violations.iter().find(|v| v.rule == Rule::JointLimit).expect("refused");
+        assert_eq!(v.joint, Some(4));
+        assert!(v.message.contains("xarm7-current"), "{}", v.message);
+        lab.arm.joint_table = crate::joint_table::JointTable::Xarm7Legacy;
+        let r = run(&traj, &lab, 250.0);
+        assert!(!r.violations.iter().any(|v| v.rule == Rule::JointLimit), "{:#?}", r.violations);
+        assert_eq!(r.joint_table, "xarm7-legacy");
     }
 
     #[test]
@@ -447,6 +539,38 @@ mod tests {
         assert!(r.violations[0].message.contains("50 Hz"));
         // The same motion at 250 Hz makes small steps.
         assert!(run(&traj, &lab, 250.0).is_safe());
+    }
+
+    #[test]
+    fn the_tcp_speed_is_checked_against_the_lab() {
+        // Joint 1 swings the outstretched arm 0.8 rad in 1 s: inside every joint limit of a lab
+        // that allows 2 rad/s, but the flange, ~0.5 m out, peaks near 0.75 m/s.
+        let mut traj = comfortable(3, 0.5, 0.0);
+        traj.t = vec![0.0, 1.0, 2.0];
+        traj.qpos[1][0] = 0.8;
+        let mut lab = LabConfig::default();
+        lab.limits.velocity_rad_s = [2.0; DOF];
+        lab.limits.acceleration_rad_s2 = [100.0; DOF];
+        lab.limits.jerk_rad_s3 = [1000.0; DOF];
+        lab.limits.max_step_rad = 0.1;
+        let r = run(&traj, &lab, 250.0);
+        assert!(r.is_safe(), "{:#?}", r.violations);
+        let peak = r.tcp_speed.peak_m_s;
+        // The analytic peak: |r x w| for the farther point, at the quintic's peak speed 1.875 x.
+        let reach = |p: nalgebra::Vector3<f64>| p.x.hypot(p.y);
+        let flange = reach(kinematics::flange_pose(&LOOK).translation.vector);
+        let cam = reach(kinematics::camera_pose(&LOOK, &lab.camera_mount()).translation.vector);
+        assert!(peak > 0.3 && peak < 1.875 * 0.8 * flange.max(cam) * 1.05, "{peak}");
+        lab.limits.tcp_speed_m_s = 0.5 * peak;
+        let r = run(&traj, &lab, 250.0);
+        let rules: Vec<Rule> = r.violations.iter().map(|v| v.rule).collect();
+        assert_eq!(rules, vec![Rule::TcpSpeed], "{:#?}", r.violations);
+        assert!(
+            r.violations[0].message.contains("TCP linear speed"),
+            "{}",
+            r.violations[0].message
+        );
+        assert!(r.violations[0].message.contains("error 60"), "{}", r.violations[0].message);
     }
 
     #[test]

@@ -142,8 +142,12 @@ fn planned_joints_reproduce_the_camera_poses_and_look_at_the_target() {
         let to_target = target - Point3::from(got.translation.vector);
         let miss = (to_target - z * to_target.dot(&z)).norm();
         assert!(miss < 1e-6 && to_target.dot(&z) > 0.0, "waypoint {k}: misses by {miss} m");
-        // Joint limits with the lab's margin.
-        assert_eq!(hitl_trajectories::kinematics::first_joint_beyond_limits(q, 0.05), None);
+        // Joint limits of the lab's table, with the lab's margin.
+        let limits = lab.arm.joint_table.limits();
+        assert_eq!(
+            hitl_trajectories::kinematics::first_joint_beyond_limits(q, &limits, 0.05),
+            None
+        );
     }
     // Captures every 4th waypoint; light constant; Sun phase in range.
     assert_eq!(traj.capture_count(), 151);

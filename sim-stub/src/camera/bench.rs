@@ -18,7 +18,7 @@ pub fn look_at_target(lab: &LabConfig, distance_m: f64) -> Joints {
     let mount = lab.camera_mount();
     let cost = |x: [f64; 3]| -> f64 {
         let q = [yaw, x[0], 0.0, x[1], 0.0, x[2], 0.0];
-        if first_joint_beyond_limits(&q, 0.05).is_some() {
+        if first_joint_beyond_limits(&q, &lab.arm.joint_table.limits(), 0.05).is_some() {
             return f64::INFINITY;
         }
         let cam = camera_pose(&q, &mount);

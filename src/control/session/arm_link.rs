@@ -1,15 +1,21 @@
-//! The link to the arm: the command client's address, the report reader (on the real-time
-//! scheduler just below the loop), the first report, and the embedded MuJoCo stub when the run
-//! targets it.
+//! The link to the arm: the command client's address, who the arm is (serial number, firmware,
+//! and so its joint-limit table), the report reader (on the real-time scheduler just below the
+//! loop), the first report, and the embedded MuJoCo stub when the run targets it.
 
 #[cfg(feature = "stub")]
 use super::devices::TargetScene;
+use super::prepare::violations;
 use super::RunError;
-use crate::rt::{self, slot::LatestSlot};
-use hitl_drivers::xarm::{ReportConfig, ReportReader};
-use hitl_hal::{ArmReports, ArmState, MonotonicClock};
-#[cfg(feature = "stub")]
+use crate::control::stop_supervisor::{supervise_stop, StopConfirmation, StopPolicy};
+use crate::control::tick::Outcome;
+use crate::rt::{self, slot::LatestSlot, slot::SlotReader};
+use hitl_drivers::xarm::{ReportConfig, ReportReader, XarmClient};
+use hitl_hal::{ArmReports, ArmState, Clock, MonotonicClock};
+use hitl_record::{EventKind, SafetyEventMsg, Telemetry};
+use hitl_trajectories::joint_table::JointTable;
 use hitl_trajectories::lab::LabConfig;
+use hitl_trajectories::timing::SetpointTable;
+use hitl_trajectories::{preflight, Trajectory};
 use std::net::{IpAddr, SocketAddr, ToSocketAddrs};
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::Arc;
@@ -21,6 +27,134 @@ pub(super) fn resolve(host: &str, port: u16) -> Result<SocketAddr, RunError> {
         .ok()
         .and_then(|mut a| a.next())
         .ok_or_else(|| RunError::BadInput(format!("cannot resolve arm address '{host}'")))
+}
+
+/// Who the connected arm is.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct ArmIdentity {
+    pub serial: String,
+    pub firmware: String,
+    /// The joint-limit table the arm enforces, from its serial number as the official SDK picks
+    /// it ([`JointTable::for_serial`]).
+    pub table: JointTable,
+}
+
+/// Ask the arm who it is: serial number and firmware version (a failure is a device fault).
+pub(super) fn read_identity(arm: &mut XarmClient) -> Result<ArmIdentity, RunError> {
+    let serial = arm
+        .serial_number()
+        .map_err(|e| RunError::Device(format!("reading the arm's serial number: {e}")))?;
+    let version =
+        arm.version().map_err(|e| RunError::Device(format!("reading the arm's firmware: {e}")))?;
+    let table = JointTable::for_serial(&serial);
+    Ok(ArmIdentity {
+        serial: serial.trim().to_string(),
+        firmware: firmware_of(&version).to_string(),
+        table,
+    })
+}
+
+/// The firmware version in a get_version text: boxes answer `axis,type,arm_sn,box_sn,vX.Y.Z`
+/// (the last field), older ones the version alone.
+fn firmware_of(version: &str) -> &str {
+    version.rsplit(',').next().unwrap_or(version).trim()
+}
+
+/// The lab as the connected arm sees it: the lab's own table, or the arm's when it is tighter
+/// (the tables are nested, so the tighter one is what both allow).
+pub(super) fn lab_for_arm(lab: &LabConfig, identity: &ArmIdentity) -> LabConfig {
+    let mut arm_lab = lab.clone();
+    arm_lab.arm.joint_table = lab.arm.joint_table.tighter(identity.table);
+    arm_lab
+}
+
+/// On connect, before anything moves: read the arm's identity, print it, and preflight the
+/// trajectory again against the tighter of the lab's and the arm's joint tables (exit 3 naming
+/// the joint and the table). Returns the lab the approach must be planned and checked in.
+pub(super) fn identify_and_check(
+    arm: &mut XarmClient,
+    lab: &LabConfig,
+    traj: &Trajectory,
+    table: &SetpointTable,
+) -> Result<LabConfig, RunError> {
+    let identity = read_identity(arm)?;
+    let arm_lab = lab_for_arm(lab, &identity);
+    crate::errln!(
+        "arm: serial {}, firmware {}, joint table {} (lab: {}; checking against {})",
+        if identity.serial.is_empty() { "(none)" } else { &identity.serial },
+        if identity.firmware.is_empty() { "(none)" } else { &identity.firmware },
+        identity.table,
+        lab.arm.joint_table,
+        arm_lab.arm.joint_table
+    );
+    let report = preflight::check(traj, table, &arm_lab);
+    if !report.is_safe() {
+        return Err(RunError::Refused(format!(
+            "the connected arm (serial {}) enforces joint table {}:\n{}",
+            identity.serial,
+            identity.table,
+            violations(&report)
+        )));
+    }
+    Ok(arm_lab)
+}
+
+/// After the loop, on the session thread: when the run tripped, repeat the box's stop every
+/// 100 ms until a report shows state 4, or 3 s pass ([`supervise_stop`]); print the result and
+/// record it as a `/safety/event` (kind `other`, detail `box stop confirmed: ...` or `box stop
+/// NOT confirmed: ...`). A completed run has nothing to stop (`None`). `reports` is the session's
+/// tap of the report slot; the reader thread must still be running.
+pub(super) fn confirm_stop(
+    arm: &mut XarmClient,
+    reports: &mut SlotReader<ArmState>,
+    outcome: &Outcome,
+    clock: MonotonicClock,
+    record: Option<&Telemetry>,
+) -> Option<StopConfirmation> {
+    let Outcome::Tripped { .. } = outcome else {
+        return None;
+    };
+    let mut latest = || reports.latest().0;
+    let confirmation = supervise_stop(arm, &mut latest, &clock, StopPolicy::default());
+    let line = confirmation.describe();
+    crate::errln!("{line}");
+    if let Some(t) = record {
+        t.push_event(SafetyEventMsg::text(clock.now_ns(), EventKind::Other, line));
+    }
+    Some(confirmation)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn the_firmware_is_the_last_field_of_the_version_text() {
+        assert_eq!(firmware_of("7,7,XS1305HITL01,XX1305HITL01,v2.5.0"), "v2.5.0");
+        assert_eq!(firmware_of("v1.9.0"), "v1.9.0");
+        assert_eq!(firmware_of(""), "");
+    }
+
+    #[test]
+    fn the_tighter_table_is_checked_on_connect() {
+        let id = |serial: &str| ArmIdentity {
+            serial: serial.into(),
+            firmware: "v2.5.0".into(),
+            table: JointTable::for_serial(serial),
+        };
+        let mut lab = LabConfig::default();
+        lab.arm.joint_table = JointTable::Xarm7Legacy;
+        assert_eq!(
+            lab_for_arm(&lab, &id("XS1305HITL01")).arm.joint_table,
+            JointTable::Xarm7Current
+        );
+        assert_eq!(lab_for_arm(&lab, &id("XS1200000001")).arm.joint_table, JointTable::Xarm7Legacy);
+        lab.arm.joint_table = JointTable::Xarm7Current;
+        assert_eq!(
+            lab_for_arm(&lab, &id("XS1200000001")).arm.joint_table,
+            JointTable::Xarm7Current
+        );
+    }
 }
 
 /// The report reader thread: reports into the latest-value slot until told to stop or the

@@ -1,12 +1,12 @@
 //! Before anything connects: the trajectory loaded, time-parametrised and preflighted, and the
 //! approach from wherever the arm stands planned and preflighted by the same rules.
 
-use super::{RunError, RunRequest};
+use super::{ArmTarget, RunError, RunRequest};
 use crate::control::motion::{plan_move, MoveLimits};
 use crate::control::setpoint::Setpoint;
 use hitl_hal::Joints;
 use hitl_trajectories::lab::LabConfig;
-use hitl_trajectories::timing::SetpointTable;
+use hitl_trajectories::timing::{SetpointTable, XARM_MAX_SERVO_RATE_HZ};
 use hitl_trajectories::{npz, preflight, Trajectory};
 
 /// The preflight's violations, one per line.
@@ -16,8 +16,29 @@ pub(super) fn violations(report: &preflight::PreflightReport) -> String {
     lines.join("\n")
 }
 
+/// Refuse a control rate the arm cannot take: an xArm control box receives servo_j at most at
+/// [`XARM_MAX_SERVO_RATE_HZ`]; faster, the box queues or drops setpoints and the loop's timing
+/// no longer means what the preflight checked. The stub obeys the same rule, so a run that
+/// passes on the stub is a run a real box can take.
+pub(super) fn check_rate(req: &RunRequest) -> Result<(), RunError> {
+    if req.rate_hz > XARM_MAX_SERVO_RATE_HZ {
+        let target = match &req.target {
+            ArmTarget::Remote { host } => format!("the arm at {host}"),
+            ArmTarget::Stub { .. } => "the stub (which plays a control box)".to_string(),
+        };
+        return Err(RunError::BadInput(format!(
+            "--rate {} Hz is more than {target} can take: an xArm control box receives servo_j \
+             setpoints at most {XARM_MAX_SERVO_RATE_HZ} Hz (UFACTORY); use --rate \
+             {XARM_MAX_SERVO_RATE_HZ} or less",
+            req.rate_hz
+        )));
+    }
+    Ok(())
+}
+
 /// Load, time-parametrise and preflight the trajectory: refuse before anything is opened.
 pub(super) fn prepare(req: &RunRequest) -> Result<(Trajectory, SetpointTable), RunError> {
+    check_rate(req)?;
     let loaded = npz::load(&req.trajectory).map_err(|e| RunError::BadInput(e.to_string()))?;
     for warning in &loaded.warnings {
         crate::errln!("warning: {warning}");

@@ -31,7 +31,7 @@ pub fn bench_ik(waypoints: usize) -> serde_json::Value {
     };
     let scene = Scene::from_lab(&lab);
     let mount = lab.camera_mount();
-    let opts = IkOptions { limit_margin_rad: lab.margins.joint_limit_rad, ..IkOptions::default() };
+    let opts = IkOptions::for_lab(&lab);
     let t0 = Instant::now();
     let seeds = ik::solve_from_seeds(&path.cam_pose[0], &mount, Some(&scene), &opts, 1);
     let seed_s = t0.elapsed().as_secs_f64();
