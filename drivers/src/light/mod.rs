@@ -1,6 +1,8 @@
 //! The studio light and the trigger box on serial lines.
 //!
 //! - [`dmx`]: DMX512 through an Enttec DMX USB Pro widget ([`DmxLight`], a [`hitl_hal::Light`]);
+//! - [`enttec`]: what the widget sends back (framing decoder, parameters and serial replies) and
+//!   [`enttec::probe_widget`] for commissioning;
 //! - [`trigger_box`]: the project's microcontroller trigger box ([`TriggerBox`]: camera trigger
 //!   and light strobe lines, light level, e-stop and door inputs), protocol in [`protocol`] and
 //!   docs/trigger-box-protocol.md;
@@ -16,6 +18,7 @@
 //! from the tick, `stop` after the loop. See docs/lights.md and docs/devices.md.
 
 pub mod dmx;
+pub mod enttec;
 pub mod fault;
 pub mod open;
 pub mod protocol;

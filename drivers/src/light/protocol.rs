@@ -223,6 +223,44 @@ mod tests {
     }
 
     proptest::proptest! {
+        /// Well-formed box lines parse back to exactly what was written (`\r\n` too).
+        #[test]
+        fn box_lines_round_trip(
+            seq in proptest::num::u32::ANY,
+            us in proptest::num::u64::ANY,
+            estop in proptest::bool::ANY,
+            door in proptest::bool::ANY,
+            code in proptest::num::u16::ANY,
+            crlf in proptest::bool::ANY,
+        ) {
+            let end = if crlf { "\r" } else { "" };
+            let ack = format!("A {seq} {us}{end}");
+            proptest::prop_assert_eq!(parse_line(ack.as_bytes()), Ok(BoxLine::Ack { seq, device_us: us }));
+            let inputs = format!("I {us} {} {}{end}", u8::from(estop), u8::from(door));
+            proptest::prop_assert_eq!(
+                parse_line(inputs.as_bytes()),
+                Ok(BoxLine::Inputs { device_us: us, estop_pressed: estop, door_open: door })
+            );
+            let err = format!("E {seq} {code}{end}");
+            proptest::prop_assert_eq!(parse_line(err.as_bytes()), Ok(BoxLine::Error { seq, code }));
+        }
+
+        /// Any byte stream through the line buffer: lines never longer than MAX_LINE, and
+        /// every line parses or is refused with a typed error.
+        #[test]
+        fn any_stream_splits_into_bounded_lines(
+            bytes in proptest::collection::vec(proptest::num::u8::ANY, 0..400)
+        ) {
+            let mut lb = LineBuffer::new();
+            for b in bytes {
+                if let Pushed::Line(l) = lb.push(b) {
+                    proptest::prop_assert!(l.len() < MAX_LINE);
+                    let _ = parse_line(l);
+                    lb.clear();
+                }
+            }
+        }
+
         #[test]
         fn parse_never_panics(bytes in proptest::collection::vec(proptest::num::u8::ANY, 0..80)) {
             let _ = parse_line(&bytes);
