@@ -569,7 +569,8 @@ impl ArmBox {
             None => self.in_contact = false,
         }
         if self.enabled && self.error == 0 {
-            let fast = self.plant.velocities().iter().any(|v| !(v.abs() <= MAX_JOINT_SPEED));
+            let fast =
+                self.plant.velocities().iter().any(|v| v.is_nan() || v.abs() > MAX_JOINT_SPEED);
             if fast {
                 self.raise_error(codes::ERR_FEEDBACK_SPEED);
             }
