@@ -183,6 +183,9 @@ fn log(r: &Rig) -> Vec<String> {
 fn a_hardware_triggered_frame_comes_back_paired_and_in_metres() {
     let mut r = armed(0x0842, true, |_| {});
     assert_eq!(r.cam.trigger_mode(), Some(TriggerMode::Hardware));
+    let armed = r.cam.armed().expect("armed");
+    assert!(armed.exposure_reference_middle && armed.global_timestamps);
+    assert_eq!((armed.color.fps, armed.depth.fps), (30, 30), "one frame rate for both");
     assert_eq!(
         log(&r),
         vec![

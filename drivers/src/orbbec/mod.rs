@@ -120,10 +120,23 @@ impl Default for OrbbecOptions {
     }
 }
 
+/// What `arm_trigger` set up.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct ArmReport {
+    pub mode: TriggerMode,
+    /// Whether the camera took the exposure reference point "middle of exposure" (cameras
+    /// without `OB_PROP_INTRA_CAMERA_SYNC_REFERENCE_INT` keep their own).
+    pub exposure_reference_middle: bool,
+    /// Whether global (exposure) timestamps are on; else frames carry their arrival time.
+    pub global_timestamps: bool,
+    pub color: VideoProfile,
+    pub depth: VideoProfile,
+}
+
 /// An Orbbec camera, hardware- or software-triggered, behind [`RgbdCamera`].
 pub struct OrbbecCamera {
     info: OrbbecInfo,
-    trigger_mode: Option<TriggerMode>,
+    armed: Option<ArmReport>,
     shared: Arc<Shared>,
     commands: Sender<Command>,
     worker: Option<JoinHandle<()>>,
@@ -176,7 +189,7 @@ impl OrbbecCamera {
                 ));
             }
         };
-        Ok(Self { info, trigger_mode: None, shared, commands: cmd_tx, worker: Some(worker) })
+        Ok(Self { info, armed: None, shared, commands: cmd_tx, worker: Some(worker) })
     }
 
     pub fn info(&self) -> &OrbbecInfo {
@@ -190,7 +203,12 @@ impl OrbbecCamera {
 
     /// The trigger mode `arm_trigger` set (None before).
     pub fn trigger_mode(&self) -> Option<TriggerMode> {
-        self.trigger_mode
+        self.armed.map(|a| a.mode)
+    }
+
+    /// What `arm_trigger` set up (None before): mode, exposure reference, timestamps, profiles.
+    pub fn armed(&self) -> Option<&ArmReport> {
+        self.armed.as_ref()
     }
 
     /// Frames dropped because `poll_frame` was not called in time.
@@ -251,8 +269,8 @@ impl RgbdCamera for OrbbecCamera {
     }
 
     fn arm_trigger(&mut self) -> Result<(), OrbbecError> {
-        let mode = self.ask(Command::Arm)?;
-        self.trigger_mode = Some(mode);
+        let report = self.ask(Command::Arm)?;
+        self.armed = Some(report);
         Ok(())
     }
 

@@ -28,7 +28,7 @@ use super::frame::{check_frameset, RawFrameset};
 use super::pairing::{Paired, Pairing};
 use super::profiles::{choose_profiles, VideoProfile};
 use super::sync::{choose_trigger, TriggerMode};
-use super::{FrameQueue, OrbbecOptions};
+use super::{ArmReport, FrameQueue, OrbbecOptions};
 
 /// How long one wait for a frameset lasts, so commands are still answered promptly.
 const POLL_MS: u32 = 5;
@@ -36,7 +36,7 @@ const POLL_MS: u32 = 5;
 /// Requests from the handle that need an answer (never sent from the tick).
 pub(super) enum Command {
     Configure(StreamConfig, Sender<Result<Intrinsics, OrbbecError>>),
-    Arm(Sender<Result<TriggerMode, OrbbecError>>),
+    Arm(Sender<Result<ArmReport, OrbbecError>>),
     Shutdown,
 }
 
@@ -150,6 +150,7 @@ struct Streaming {
     k: Intrinsics,
     global: bool,
     monotonic: bool,
+    report: ArmReport,
 }
 
 struct Worker<B> {
@@ -188,7 +189,7 @@ impl<B: CameraSdk> Worker<B> {
         Ok(k)
     }
 
-    fn arm(&mut self) -> Result<TriggerMode, OrbbecError> {
+    fn arm(&mut self) -> Result<ArmReport, OrbbecError> {
         let (color, depth, k) = match &self.state {
             State::Opened => {
                 return Err(OrbbecError::new(
@@ -196,15 +197,16 @@ impl<B: CameraSdk> Worker<B> {
                     "Orbbec camera: arm_trigger before configure",
                 ))
             }
-            State::Streaming(s) => return Ok(s.mode),
+            State::Streaming(s) => return Ok(s.report),
             State::Configured { color, depth, k } => (*color, *depth, *k),
         };
         let id = self.cam.identity()?;
         let advertised = self.cam.advertised_sync_modes()?;
         let mode = choose_trigger(id.product_id, advertised, self.options.trigger)?;
         self.cam.set_trigger_mode(mode)?;
-        // Optional on older firmware; the lab check says which point the stamps mark.
-        self.cam.set(Setting::ExposureReference, OB_MIDDLE_OF_EXPOSURE)?;
+        // Optional on older firmware (reported); the lab check says which point the stamps mark.
+        let exposure_reference_middle =
+            self.cam.set(Setting::ExposureReference, OB_MIDDLE_OF_EXPOSURE)?;
         if let Some(level) = self.options.sync_voltage_level {
             if !self.cam.set(Setting::SyncVoltageLevel, level)? {
                 return Err(OrbbecError::new(
@@ -220,8 +222,10 @@ impl<B: CameraSdk> Worker<B> {
         let global = self.cam.enable_global_timestamps()?;
         self.cam.start(color, depth)?;
         let monotonic = self.cam.monotonic_stamps();
-        self.state = State::Streaming(Streaming { mode, k, global, monotonic });
-        Ok(mode)
+        let report =
+            ArmReport { mode, exposure_reference_middle, global_timestamps: global, color, depth };
+        self.state = State::Streaming(Streaming { mode, k, global, monotonic, report });
+        Ok(report)
     }
 
     fn missed(&mut self, n: u32, mode: TriggerMode) {
