@@ -72,6 +72,10 @@ impl CameraSdk for Double {
         Ok(())
     }
     fn set(&mut self, setting: Setting, value: i32) -> Result<bool, OrbbecError> {
+        // Firmware older than 1.0.76 has no sync voltage property.
+        if setting == Setting::SyncVoltageLevel && self.pid == 0x0841 {
+            return Ok(false);
+        }
         self.note(format!("set {setting:?} {value}"));
         Ok(true)
     }
@@ -354,4 +358,16 @@ fn an_unplugged_camera_is_disconnected() {
     let e = next_frame(&mut r, Duration::from_secs(2)).expect_err("unplugged");
     assert_eq!(e.kind(), ErrorKind::Disconnected);
     assert!(r.cam.fault_detail().expect("detail").message().contains("unplugged"));
+}
+
+#[test]
+fn the_sync_voltage_is_written_where_the_firmware_has_it_and_refused_where_not() {
+    let r = armed(0x0840, true, |o| o.sync_voltage_level = Some(1));
+    assert!(log(&r).contains(&"set SyncVoltageLevel 1".to_string()), "{:?}", log(&r));
+    let mut old = rig_with(0x0841, true, |o| o.sync_voltage_level = Some(1));
+    old.cam.configure(&config()).expect("configure");
+    let e = old.cam.arm_trigger().expect_err("no sync voltage property");
+    assert_eq!(e.kind(), ErrorKind::InvalidRequest);
+    assert!(e.message().contains("firmware >= 1.0.76"), "{e}");
+    assert!(!log(&old).iter().any(|l| l.starts_with("start")), "nothing started: {:?}", log(&old));
 }

@@ -78,6 +78,39 @@ impl Pairing {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use proptest::prelude::*;
+
+    proptest! {
+        /// Whatever the order of triggers and frames: a frame is never paired with a trigger fired
+        /// after it (beyond the slack), each trigger is answered at most once, and every trigger
+        /// ends up answered, missed or still pending.
+        #[test]
+        fn never_a_frame_before_its_trigger(
+            events in proptest::collection::vec((any::<bool>(), 0u64..1_000, any::<bool>()), 1..60),
+            slack in 0u64..20,
+        ) {
+            let mut p = Pairing::new(4, slack);
+            let (mut t, mut fired, mut answered, mut missed) = (0u64, 0u32, Vec::new(), 0u32);
+            for (is_trigger, dt, exposure) in events {
+                t += dt;
+                if is_trigger {
+                    fired += 1;
+                    if p.push(r(u64::from(fired), t)).is_some() {
+                        missed += 1;
+                    }
+                } else {
+                    let stamp = t.saturating_sub(dt / 2);
+                    if let Paired::Frame { request, missed: m } = p.pair(stamp, exposure) {
+                        prop_assert!(request.fired_ns <= stamp + slack);
+                        prop_assert!(!answered.contains(&request.tick));
+                        answered.push(request.tick);
+                        missed += m;
+                    }
+                }
+            }
+            prop_assert_eq!(answered.len() as u32 + missed + p.pending() as u32, fired);
+        }
+    }
 
     fn r(tick: u64, fired_ns: u64) -> CaptureRequest {
         CaptureRequest { tick, fired_ns }

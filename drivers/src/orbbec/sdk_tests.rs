@@ -27,11 +27,11 @@ fn sdk() -> Arc<Sdk> {
     sdk
 }
 
-/// Depth units of 0.1 mm: depth pixel (16, 12) at 1 m and (8, 6) at 2 m, nothing elsewhere.
-fn depth_image() -> Vec<u8> {
-    let mut d = vec![0u8; (DW * DH * 2) as usize];
-    for (u, v, units) in [(16u32, 12u32, 10_000u16), (8, 6, 20_000)] {
-        let i = ((v * DW + u) * 2) as usize;
+/// Depth units of 0.1 mm, `w` wide: the given pixels at the given units, nothing elsewhere.
+fn depth_image(w: u32, h: u32, marks: &[(u32, u32, u16)]) -> Vec<u8> {
+    let mut d = vec![0u8; (w * h * 2) as usize];
+    for &(u, v, units) in marks {
+        let i = ((v * w + u) * 2) as usize;
         d[i..i + 2].copy_from_slice(&units.to_le_bytes());
     }
     d
@@ -41,23 +41,37 @@ fn color_image() -> Vec<u8> {
     (0..CW * CH * 3).map(|i| (i % 251) as u8).collect()
 }
 
-/// Colour 64x48 (f 50 px), depth 32x24 (f 25 px), depth -> colour translated by `tx_mm` along x;
-/// returns the converted colour and depth (metres), stamp, whether it is an exposure stamp and
-/// the device time.
+/// Colour 64x48 (f 50 px), depth 32x24 (f 25 px) with depth pixel (16, 12) at 1 m and (8, 6) at
+/// 2 m, depth -> colour translated by `tx_mm` along x; returns the converted colour and depth
+/// (metres), stamp, whether it is an exposure stamp and the device time.
 fn align(tx_mm: f32) -> (Vec<u8>, Vec<f32>, u64, bool, u64) {
+    let dk = ObCameraIntrinsic { fx: 25.0, fy: 25.0, cx: 16.0, cy: 12.0, width: 32, height: 24 };
+    let depth = depth_image(DW, DH, &[(16, 12, 10_000), (8, 6, 20_000)]);
+    align_depth(dk, &depth, tx_mm)
+}
+
+fn align_depth(
+    dk: ObCameraIntrinsic,
+    depth: &[u8],
+    tx_mm: f32,
+) -> (Vec<u8>, Vec<f32>, u64, bool, u64) {
     let sdk = sdk();
     let cd = ProfileDesc { width: CW, height: CH, format: FORMAT_RGB, fps: 30 };
-    let dd = ProfileDesc { width: DW, height: DH, format: FORMAT_Y16, fps: 30 };
+    let dd = ProfileDesc {
+        width: u32::try_from(dk.width).expect("width"),
+        height: u32::try_from(dk.height).expect("height"),
+        format: FORMAT_Y16,
+        fps: 30,
+    };
     let ck = ObCameraIntrinsic { fx: 50.0, fy: 50.0, cx: 32.0, cy: 24.0, width: 64, height: 48 };
-    let dk = ObCameraIntrinsic { fx: 25.0, fy: 25.0, cx: 16.0, cy: 12.0, width: 32, height: 24 };
     let cp = Profile::new_video(&sdk, OB_STREAM_COLOR, cd, ck).expect("colour profile");
     let dp = Profile::new_video(&sdk, OB_STREAM_DEPTH, dd, dk).expect("depth profile");
     let rot = [1.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 1.0];
     dp.set_extrinsic_to(&cp, ObExtrinsic { rot, trans: [tx_mm, 0.0, 0.0] }).expect("extrinsic");
     let color = color_image();
     let cf = Frame::new_video(&cp, OB_FRAME_COLOR, cd, &color, 1_000, 2_000, None).expect("colour");
-    let df = Frame::new_video(&dp, OB_FRAME_DEPTH, dd, &depth_image(), 1_000, 2_000, Some(0.1))
-        .expect("depth");
+    let df =
+        Frame::new_video(&dp, OB_FRAME_DEPTH, dd, depth, 1_000, 2_000, Some(0.1)).expect("depth");
     let set = Frame::new_frameset(&sdk, &[&cf, &df]).expect("frameset");
     let mut filter = AlignFilter::depth_to_color(&sdk).expect("Align filter");
     let raw = align_and_copy(&mut filter, &set).expect("aligned");
@@ -108,6 +122,19 @@ fn without_a_baseline_the_same_pixel_lands_on_the_principal_point() {
     let (u, v, n) = centroid(&depth, 1.0);
     assert!(n > 0);
     assert!((u - 32.0).abs() <= 0.75 && (v - 24.0).abs() <= 0.75, "1 m at ({u}, {v})");
+}
+
+/// The other case: depth and colour of the same size and intrinsics are still two
+/// cameras a baseline apart; the depth must move, not just be relabelled.
+#[test]
+fn equal_sizes_are_aligned_too() {
+    let dk = ObCameraIntrinsic { fx: 50.0, fy: 50.0, cx: 32.0, cy: 24.0, width: 64, height: 48 };
+    let depth = depth_image(CW, CH, &[(32, 24, 10_000)]);
+    let (_, aligned, ..) = align_depth(dk, &depth, 40.0);
+    let (u, v, n) = centroid(&aligned, 1.0);
+    assert!(n > 0);
+    assert_eq!(aligned[24 * CW as usize + 32], 0.0, "the unaligned place is empty");
+    assert!((u - 34.0).abs() <= 0.75 && (v - 24.0).abs() <= 0.75, "1 m at ({u}, {v}), n {n}");
 }
 
 /// The sync config struct is packed in the header (25 bytes); a padded layout would shift
