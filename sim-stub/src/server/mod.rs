@@ -155,6 +155,12 @@ pub struct Counters {
     pub connections: AtomicU64,
     pub reports_sent: AtomicU64,
     pub bad_frames: AtomicU64,
+    /// Command frames handled on the command port.
+    pub commands: AtomicU64,
+    /// Of those, the ones that waited for their slot (they came faster than 250 per second).
+    pub paced_commands: AtomicU64,
+    /// The longest wait for a slot, ns (how far behind a stream fell).
+    pub max_pace_wait_ns: AtomicU64,
 }
 
 /// State shared by the stub's threads.
@@ -189,10 +195,16 @@ impl Shared {
     /// it is handled at, seconds after start.
     pub fn pace_command(&self) -> f64 {
         let now = self.elapsed_ns();
+        let c = &self.counters;
+        c.commands.fetch_add(1, Ordering::Relaxed);
         if self.pacer.period_ns == 0 {
             return now as f64 * 1e-9;
         }
         let slot = self.pacer.reserve(now);
+        if slot > now {
+            c.paced_commands.fetch_add(1, Ordering::Relaxed);
+            c.max_pace_wait_ns.fetch_max(slot - now, Ordering::Relaxed);
+        }
         loop {
             let now = self.elapsed_ns();
             if now >= slot {
