@@ -353,3 +353,21 @@ fn an_error_line_from_the_trigger_box_is_a_device_fault_with_exit_5() {
     assert!(run.text().contains("trigger box reported an error"), "{}", run.text());
     assert!(run.stop_setpoints() > 0, "a controlled stop: {}", run.text());
 }
+
+#[test]
+fn a_mistyped_device_choice_fails_with_exit_2_before_anything_loads() {
+    // The trajectory does not exist: had anything been loaded, the error would name the file.
+    for (flag, value) in [
+        ("--camera", "orbec"),
+        ("--light", "dmx"),
+        ("--light", "dmx:/dev/null,addr=600"),
+        ("--perception", "icpp"),
+        ("--stub-fault", "estopp@1"),
+    ] {
+        let out = common::hitl(&["run", "/nonexistent/traj.npz", flag, value]);
+        let err = String::from_utf8_lossy(&out.stderr);
+        assert_eq!(out.status.code(), Some(2), "{flag} {value}: {err}");
+        assert!(err.contains(&format!("invalid value '{value}' for '{flag}")), "{err}");
+        assert!(!err.contains("traj.npz"), "refused before loading: {err}");
+    }
+}

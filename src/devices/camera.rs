@@ -21,7 +21,7 @@ pub enum CameraSpec {
 
 /// Why a `--camera` value was refused.
 #[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
-#[error("--camera {0:?}: expected sim, orbbec or none")]
+#[error("{0:?} is not a camera: expected sim, orbbec or none")]
 pub struct CameraSpecError(pub String);
 
 impl FromStr for CameraSpec {

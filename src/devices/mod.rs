@@ -2,6 +2,7 @@
 //! values), opening them on the run's runtime, and holding them behind one shape for the loop.
 //! This is the only part of the controller that names drivers; `src/control` sees hal traits.
 //!
+//! - [`arm`]: the arm's driver, named for the session;
 //! - [`camera`]: `--camera` ([`CameraSpec`]), the stream asked of it, and opening it;
 //! - [`light`]: `--light` (the drivers' `LightSpec` registry) and the inputs and trigger lines
 //!   that come with a light device;
@@ -10,6 +11,7 @@
 //! - [`none`]: the deliberately absent devices.
 
 pub mod any;
+pub mod arm;
 pub mod camera;
 pub mod inputs;
 pub mod light;
@@ -17,9 +19,9 @@ pub mod none;
 
 pub use any::{RunCamera, RunLight, RunTrigger};
 pub use camera::{CameraSpec, CameraSpecError};
+pub use hitl_drivers::light::LightSpec;
 pub use inputs::RunInputs;
 
-use hitl_drivers::light::LightSpec;
 use hitl_hal::{Lifecycle, MonotonicClock, RgbdCamera, StreamConfig};
 
 /// Why a device could not be opened or started.

@@ -15,20 +15,21 @@ pub enum SerialLight {
 }
 
 impl SerialLight {
-    /// Open the serial light `spec` names; `Ok(None)` for `sim` and `none` (not serial).
-    /// Must run inside a tokio runtime.
+    /// Open the serial light `spec` names as this enum (for `hitl probe`, which asks each kind
+    /// its own questions); `Ok(None)` for `sim`, `none` and kinds it does not know. A run opens
+    /// lights through [`LightSpec::open`] instead. Must run inside a tokio runtime.
     pub async fn open(
         spec: &LightSpec,
         clock: MonotonicClock,
     ) -> Result<Option<Self>, SerialError> {
         Ok(match spec {
-            LightSpec::Sim | LightSpec::None => None,
             LightSpec::Dmx { port, config } => {
                 Some(SerialLight::Dmx(DmxLight::open(port, *config).await?))
             }
             LightSpec::Trigger { port } => Some(SerialLight::Trigger(
                 TriggerBox::open(port, TriggerBoxConfig::default(), clock).await?,
             )),
+            _ => None,
         })
     }
 }

@@ -29,6 +29,8 @@ use crate::control::stop::StopPlanner;
 use crate::control::stop_supervisor::StopConfirmation;
 use crate::control::telemetry::LoopStatus;
 use crate::control::tick::{ControlLoop, Devices, Health, LoopIo, Outcome, Program};
+use crate::devices::arm::{ClientConfig, ReportKind, RunArm, ServoReplies, COMMAND_PORT};
+use crate::devices::LightSpec;
 use crate::devices::{self as run_devices, CameraSpec, DeviceChoice, DeviceError, RunDevices};
 use crate::exit;
 use crate::rt::{self, slot::LatestSlot, slot::SlotReader, RtOptions};
@@ -36,8 +38,6 @@ use arm_link::{connect_reports, first_report, resolve, spawn_report_reader};
 #[cfg(feature = "stub")]
 use arm_link::{start_stub, EmbeddedStub};
 use devices::{collect_late_frames, record_pose, start_recorder, target_scene, TargetScene};
-use hitl_drivers::light::LightSpec;
-use hitl_drivers::xarm::{ClientConfig, ReportKind, ServoReplies, XarmClient};
 use hitl_hal::{Arm, ArmState, Joints, MonotonicClock};
 use hitl_perception::{backend_from_spec, spawn_worker, BackendSpec, ReregisterPolicy};
 use hitl_record::{
@@ -341,7 +341,7 @@ fn start_arm_target(req: &RunRequest, scene: &TargetScene) -> Result<ArmTargetLi
             Err(RunError::BadInput("this build has no embedded stub: pass --arm HOST".into()))
         }
         ArmTarget::Remote { host } => {
-            let cmd_addr = resolve(host, hitl_drivers::xarm::COMMAND_PORT)?;
+            let cmd_addr = resolve(host, COMMAND_PORT)?;
             Ok(ArmTargetLink {
                 cmd_addr,
                 report_host: cmd_addr.ip(),
@@ -495,7 +495,7 @@ impl CapturePath {
 
 /// The arm, connected and enabled, with its report stream.
 struct ArmLink {
-    arm: XarmClient,
+    arm: RunArm,
     reports: Option<SlotReader<ArmState>>,
     reader_stop: Arc<AtomicBool>,
     reader_thread: Option<std::thread::JoinHandle<()>>,
@@ -527,7 +527,7 @@ fn connect_arm(
     let replies =
         ServoReplies::Pipelined { max_outstanding: thresholds.unanswered_setpoints(table.rate_hz) };
     let cmd_addr = target.cmd_addr;
-    let mut arm = XarmClient::connect(
+    let mut arm = RunArm::connect(
         cmd_addr,
         ClientConfig { servo_replies: replies, ..ClientConfig::default() },
     )
