@@ -36,6 +36,8 @@ enum Command {
     Eval(cli::eval::EvalArgs),
     /// Benchmarks; `--json` prints one JSON object of figures.
     Bench(cli::bench::BenchArgs),
+    /// Commission devices: list ports and cameras, check each named device answers. Moves nothing.
+    Probe(cli::probe::ProbeArgs),
 }
 
 fn main() -> ExitCode {
@@ -56,6 +58,7 @@ fn main() -> ExitCode {
         Command::Report(args) => cli::report::run(args),
         Command::Eval(args) => cli::eval::run(args),
         Command::Bench(args) => cli::bench::run(args),
+        Command::Probe(args) => cli::probe::run(args),
     };
     ExitCode::from(code)
 }

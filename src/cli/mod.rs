@@ -4,6 +4,7 @@ pub mod bench;
 pub mod check;
 pub mod eval;
 pub mod plan;
+pub mod probe;
 pub mod report;
 pub mod reregister;
 pub mod run;

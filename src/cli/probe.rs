@@ -1,0 +1,178 @@
+//! `hitl probe`: commission the enclosure's devices without moving anything.
+//!
+//! Lists the serial ports and cameras it can see, then opens each device the operator names and
+//! prints what it answers: the trigger box's inputs, the DMX widget, the arm's identity, state,
+//! codes and joint-limit table, the camera's profiles and sync modes. Nothing is enabled and no
+//! command that could move the arm is sent (only reads: serial number, version, state, codes).
+//! Exit 0 when every named device answered, 5 naming the first one that did not, 2 for bad flags.
+
+use crate::exit;
+use crate::{errln, outln};
+use hitl_drivers::light::{LightSpec, SerialLight};
+use hitl_drivers::xarm::{ClientConfig, XarmClient};
+use hitl_hal::{Arm as _, Inputs as _, MonotonicClock};
+use hitl_trajectories::joint_table::JointTable;
+
+/// Commission devices: list what is connected and check that each named device answers.
+#[derive(Debug, clap::Args)]
+pub struct ProbeArgs {
+    /// Arm control box to query: HOST (command port 502) or HOST:PORT (a `hitl stub` on another
+    /// port). Only reads are sent: serial number, firmware version, state, error codes.
+    #[arg(long, value_name = "HOST")]
+    pub arm: Option<String>,
+    /// Require an Orbbec camera: without it, cameras are listed (profiles, sync modes) but none
+    /// found is not a failure.
+    #[arg(long)]
+    pub camera: bool,
+    /// Light to open: `dmx:DEV[,addr=N][,16bit]` (the Enttec widget) or `trigger:DEV` (the
+    /// trigger box: pinged, inputs printed). `sim` and `none` are accepted and probe nothing.
+    #[arg(long, value_name = "SPEC")]
+    pub light: Option<LightSpec>,
+}
+
+/// One named device that did not answer.
+struct Failed {
+    device: &'static str,
+    why: String,
+}
+
+pub fn run(args: ProbeArgs) -> u8 {
+    list_serial_ports();
+    let mut failed: Vec<Failed> = Vec::new();
+    if let Some(spec) = &args.light {
+        if let Err(why) = probe_light(spec) {
+            failed.push(Failed { device: "light", why });
+        }
+    }
+    if let Some(host) = &args.arm {
+        if let Err(why) = probe_arm(host) {
+            failed.push(Failed { device: "arm", why });
+        }
+    }
+    if let Err(why) = probe_camera(args.camera) {
+        failed.push(Failed { device: "camera", why });
+    }
+    match failed.first() {
+        None => {
+            outln!("probe: every named device answered");
+            exit::OK
+        }
+        Some(first) => {
+            for f in &failed {
+                errln!("probe: {} did not answer: {}", f.device, f.why);
+            }
+            errln!("probe: {} failed (exit 5)", first.device);
+            exit::DEVICE
+        }
+    }
+}
+
+fn list_serial_ports() {
+    match tokio_serial::available_ports() {
+        Ok(ports) if ports.is_empty() => outln!("serial ports: none found"),
+        Ok(ports) => {
+            outln!("serial ports:");
+            for p in ports {
+                let what = match &p.port_type {
+                    tokio_serial::SerialPortType::UsbPort(u) => format!(
+                        "USB {:04x}:{:04x} {} {}",
+                        u.vid,
+                        u.pid,
+                        u.manufacturer.as_deref().unwrap_or(""),
+                        u.product.as_deref().unwrap_or("")
+                    ),
+                    tokio_serial::SerialPortType::PciPort => "PCI".into(),
+                    tokio_serial::SerialPortType::BluetoothPort => "Bluetooth".into(),
+                    tokio_serial::SerialPortType::Unknown => "unknown".into(),
+                };
+                outln!("  {}  {}", p.port_name, what.trim());
+            }
+        }
+        Err(e) => errln!("serial ports: cannot list ({e})"),
+    }
+}
+
+fn probe_light(spec: &LightSpec) -> Result<(), String> {
+    let rt = tokio::runtime::Builder::new_multi_thread()
+        .worker_threads(1)
+        .enable_all()
+        .build()
+        .map_err(|e| format!("cannot start the I/O runtime: {e}"))?;
+    rt.block_on(async {
+        let light =
+            SerialLight::open(spec, MonotonicClock::new()).await.map_err(|e| e.to_string())?;
+        match light {
+            None => {
+                outln!("light {spec}: not a serial device, nothing to probe");
+                Ok(())
+            }
+            Some(SerialLight::Trigger(mut tb)) => {
+                // `open` has already seen the ping's acknowledgement and a first input report.
+                let inputs = tb.read().map_err(|e| e.to_string())?;
+                outln!(
+                    "trigger box {spec}: answered the ping; e-stop {}, door {}",
+                    if inputs.estop_pressed { "PRESSED" } else { "released" },
+                    if inputs.door_open { "OPEN" } else { "closed" }
+                );
+                if let Some(u) = tb.clock_uncertainty_ns() {
+                    outln!("  clock offset known to {:.0} us", u as f64 / 1e3);
+                }
+                Ok(())
+            }
+            Some(SerialLight::Dmx(_)) => {
+                outln!("DMX widget {spec}: port opened (a widget sends no answer to DMX frames)");
+                Ok(())
+            }
+        }
+    })
+}
+
+fn probe_arm(host: &str) -> Result<(), String> {
+    let config = ClientConfig::default();
+    let connected = match host.parse::<std::net::SocketAddr>() {
+        Ok(addr) => XarmClient::connect(addr, config),
+        Err(_) => XarmClient::connect_host(host, config),
+    };
+    let mut arm = connected.map_err(|e| e.to_string())?;
+    let serial = arm.serial_number().map_err(|e| format!("serial number: {e}"))?;
+    let version = arm.version().map_err(|e| format!("firmware version: {e}"))?;
+    let state = arm.state().map_err(|e| format!("state: {e}"))?;
+    let (error, warning) = arm.codes().map_err(|e| format!("error codes: {e}"))?;
+    let table = JointTable::for_serial(&serial);
+    outln!("arm {host}: serial {serial}, firmware {version}");
+    outln!("  state {state}, error code {error}, warning code {warning}");
+    let limits = table
+        .limits()
+        .iter()
+        .enumerate()
+        .map(|(j, (lo, hi))| format!("J{} {:.4}..{:.4}", j + 1, lo, hi))
+        .collect::<Vec<_>>()
+        .join(", ");
+    outln!("  joint-limit table {table}: {limits} rad");
+    Ok(())
+}
+
+/// List the cameras the Orbbec SDK sees; with `--camera`, none is a failure.
+fn probe_camera(named: bool) -> Result<(), String> {
+    use hitl_drivers::orbbec::{probe, OrbbecOptions};
+    let library = OrbbecOptions::default_library();
+    let cameras = match probe(&library) {
+        Ok(c) => c,
+        Err(e) if named => return Err(e.to_string()),
+        Err(e) => {
+            outln!("cameras: cannot list ({e})");
+            return Ok(());
+        }
+    };
+    if cameras.is_empty() {
+        outln!("cameras: none found (Orbbec SDK at {})", library.display());
+        return if named { Err("no Orbbec camera connected".into()) } else { Ok(()) };
+    }
+    outln!("cameras:");
+    for c in &cameras {
+        for line in c.describe().lines() {
+            outln!("  {line}");
+        }
+    }
+    Ok(())
+}
