@@ -1,4 +1,4 @@
-//! The contract's exit codes (ARCHITECTURE.md): scripts and tests outside the project rely on them.
+//! The contract's exit codes (docs/architecture.md): scripts and tests outside the project rely on them.
 
 /// Done.
 pub const OK: u8 = 0;

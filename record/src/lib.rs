@@ -4,7 +4,7 @@
 //! blocking: a full queue drops its oldest message and counts it) and frames through a separate
 //! small queue (a frame that cannot be queued becomes a `capture-not-recorded` safety event).
 //! The [`Recorder`] thread drains them into an MCAP file whose topics are the contract in
-//! ARCHITECTURE.md (see docs/mcap-topics.md), closing a chunk at least every 250 ms so a killed
+//! docs/architecture.md (see docs/mcap-topics.md), closing a chunk at least every 250 ms so a killed
 //! process loses at most that. [`RecorderHealth::is_failed`] tells the tick when the file can
 //! no longer be written so the interlock can trip.
 

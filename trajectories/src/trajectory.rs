@@ -1,4 +1,4 @@
-//! The in-memory trajectory: the NPZ schema of ARCHITECTURE.md as typed Rust data.
+//! The in-memory trajectory: the NPZ schema of docs/architecture.md as typed Rust data.
 //!
 //! Loading and writing live in [`crate::npz`]; validation of values in [`crate::npz`] as well
 //! (every array is checked against `qpos`'s waypoint count when it is read).

@@ -1,4 +1,4 @@
-//! Loading and writing NPZ trajectories (the schema in ARCHITECTURE.md and `docs/npz-schema.md`).
+//! Loading and writing NPZ trajectories (the schema in docs/architecture.md and `docs/npz-schema.md`).
 //!
 //! Layers, each with one concern:
 //! - [`read`]: the zip container (`zip` crate) and each entry's `.npy` array (`npyz`), bounded by

@@ -1,4 +1,4 @@
-//! The NPZ schema of ARCHITECTURE.md: which keys exist, their shapes and dtypes, and the value
+//! The NPZ schema of docs/architecture.md: which keys exist, their shapes and dtypes, and the value
 //! rules (finite numbers, `t` strictly increasing, light in [0, 1], one row per waypoint).
 
 use super::error::{ColumnLabel, NpzError};
