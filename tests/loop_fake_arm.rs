@@ -160,6 +160,7 @@ fn run(program: &Program, script: Script, operator_stop_at: Option<u64>) -> Ran 
         report_timeout_ns: 100_000_000,
         max_deviation_rad: 0.08,
         trip_on_warning: true,
+        reply_stall_ns: 250_000_000,
     });
     if let Some(at) = operator_stop_at {
         let (flag, status) = (Arc::clone(&health.operator_stop), Arc::clone(&status));

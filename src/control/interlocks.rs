@@ -14,7 +14,7 @@ pub enum TripKind {
     /// The command connection to the arm failed (closed, reset, unreadable bytes).
     ConnectionLost,
     /// The connection is open but the arm stopped answering setpoints (or accepting them) for
-    /// longer than the silence the lab tolerates (`interlocks.report_timeout_ms`).
+    /// longer than the reply stall the lab rides through (`interlocks.reply_stall_ms`).
     SetpointsUnanswered,
     /// The arm reports an error code.
     ArmError { code: u8 },
@@ -114,7 +114,7 @@ impl TripKind {
             }
             TripKind::ConnectionLost => "the command connection to the arm failed".into(),
             TripKind::SetpointsUnanswered => {
-                "the arm stopped answering setpoints for longer than interlocks.report_timeout_ms"
+                "the arm stopped answering setpoints for longer than interlocks.reply_stall_ms"
                     .into()
             }
             TripKind::ArmError { code } => format!("the arm reports error code {code}"),
@@ -148,6 +148,8 @@ pub struct Thresholds {
     pub report_timeout_ns: u64,
     pub max_deviation_rad: f64,
     pub trip_on_warning: bool,
+    /// How long the command channel may leave setpoints unanswered.
+    pub reply_stall_ns: u64,
 }
 
 impl Thresholds {
@@ -156,14 +158,16 @@ impl Thresholds {
             report_timeout_ns: lab.interlocks.report_timeout_ms.saturating_mul(1_000_000),
             max_deviation_rad: lab.interlocks.max_deviation_rad,
             trip_on_warning: lab.interlocks.trip_on_warning,
+            reply_stall_ns: lab.interlocks.reply_stall_ms.saturating_mul(1_000_000),
         }
     }
 
     /// How many setpoint replies may be missing before the arm counts as silent: as many as the
-    /// loop sends in `report_timeout` at `rate_hz` (25 at the defaults, 100 ms and 250 Hz), so a
-    /// silent command channel trips after the same silence as a silent report stream.
+    /// loop sends in `reply_stall` at `rate_hz` (63 at the defaults, 250 ms and 250 Hz). A
+    /// shorter stall is ridden through: the reports and the deviation interlock still watch the
+    /// arm every tick (docs/safety.md, "Reply stalls").
     pub fn unanswered_setpoints(&self, rate_hz: f64) -> u32 {
-        let ticks = (self.report_timeout_ns as f64 * 1e-9 * rate_hz).ceil();
+        let ticks = (self.reply_stall_ns as f64 * 1e-9 * rate_hz).ceil();
         if ticks.is_finite() {
             ticks.clamp(1.0, f64::from(u32::MAX)) as u32
         } else {
@@ -263,16 +267,21 @@ mod tests {
             report_timeout_ns: 100_000_000,
             max_deviation_rad: 0.08,
             trip_on_warning: true,
+            reply_stall_ns: 250_000_000,
         })
     }
 
     #[test]
-    fn the_command_channel_may_be_silent_as_long_as_the_report_stream() {
-        assert_eq!(il().thresholds.unanswered_setpoints(250.0), 25);
-        assert_eq!(il().thresholds.unanswered_setpoints(100.0), 10);
-        let shared_vm = Thresholds { report_timeout_ns: 1_000_000_000, ..il().thresholds };
+    fn the_command_channel_may_stall_for_the_labs_reply_stall() {
+        let lab = Thresholds::from_lab(&hitl_trajectories::lab::LabConfig::default());
+        assert_eq!(lab, il().thresholds);
+        // 250 ms: a 190 ms stall (47.5 setpoints at 250 Hz) is ridden through.
+        assert_eq!(il().thresholds.unanswered_setpoints(250.0), 63);
+        assert!(f64::from(il().thresholds.unanswered_setpoints(250.0)) > 0.19 * 250.0);
+        assert_eq!(il().thresholds.unanswered_setpoints(100.0), 25);
+        let shared_vm = Thresholds { reply_stall_ns: 1_000_000_000, ..il().thresholds };
         assert_eq!(shared_vm.unanswered_setpoints(250.0), 250);
-        let zero = Thresholds { report_timeout_ns: 0, ..il().thresholds };
+        let zero = Thresholds { reply_stall_ns: 0, ..il().thresholds };
         assert_eq!(zero.unanswered_setpoints(250.0), 1, "at least one reply may be in flight");
         assert_eq!(il().thresholds.unanswered_setpoints(f64::NAN), 1);
     }

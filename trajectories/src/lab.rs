@@ -222,11 +222,21 @@ pub struct Interlocks {
     pub max_deviation_rad: f64,
     /// Trip on any arm warning code, not only on errors. Default true.
     pub trip_on_warning: bool,
+    /// Longest the arm may leave setpoints unanswered (the command channel silent while the
+    /// connection stays open) before the run holds, milliseconds. Default 250: a real xArm7's
+    /// replies have been seen to stall about 190 ms; the run rides such a stall through while
+    /// the reports (watchdog) and the deviation interlock keep watching the arm (docs/safety.md).
+    pub reply_stall_ms: u64,
 }
 
 impl Default for Interlocks {
     fn default() -> Self {
-        Self { report_timeout_ms: 100, max_deviation_rad: 0.08, trip_on_warning: true }
+        Self {
+            report_timeout_ms: 100,
+            max_deviation_rad: 0.08,
+            trip_on_warning: true,
+            reply_stall_ms: 250,
+        }
     }
 }
 
@@ -341,6 +351,9 @@ impl LabConfig {
         }
         if self.interlocks.report_timeout_ms == 0 {
             return bad("interlocks.report_timeout_ms must be positive".into());
+        }
+        if self.interlocks.reply_stall_ms == 0 {
+            return bad("interlocks.reply_stall_ms must be positive".into());
         }
         if let Some(m) = self.target.model_size_m {
             if !(m > 0.0 && m.is_finite()) {

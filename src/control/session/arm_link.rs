@@ -124,39 +124,6 @@ pub(super) fn confirm_stop(
     Some(confirmation)
 }
 
-#[cfg(test)]
-mod tests {
-    use super::*;
-
-    #[test]
-    fn the_firmware_is_the_last_field_of_the_version_text() {
-        assert_eq!(firmware_of("7,7,XS1305HITL01,XX1305HITL01,v2.5.0"), "v2.5.0");
-        assert_eq!(firmware_of("v1.9.0"), "v1.9.0");
-        assert_eq!(firmware_of(""), "");
-    }
-
-    #[test]
-    fn the_tighter_table_is_checked_on_connect() {
-        let id = |serial: &str| ArmIdentity {
-            serial: serial.into(),
-            firmware: "v2.5.0".into(),
-            table: JointTable::for_serial(serial),
-        };
-        let mut lab = LabConfig::default();
-        lab.arm.joint_table = JointTable::Xarm7Legacy;
-        assert_eq!(
-            lab_for_arm(&lab, &id("XS1305HITL01")).arm.joint_table,
-            JointTable::Xarm7Current
-        );
-        assert_eq!(lab_for_arm(&lab, &id("XS1200000001")).arm.joint_table, JointTable::Xarm7Legacy);
-        lab.arm.joint_table = JointTable::Xarm7Current;
-        assert_eq!(
-            lab_for_arm(&lab, &id("XS1200000001")).arm.joint_table,
-            JointTable::Xarm7Current
-        );
-    }
-}
-
 /// The report reader thread: reports into the latest-value slot until told to stop or the
 /// stream fails (then the tick's watchdog trips).
 ///
@@ -244,4 +211,37 @@ pub(super) fn connect_reports(
     let config = ReportConfig { port: Some(port), codes_port, clock, ..ReportConfig::default() };
     ReportReader::connect(host, config)
         .map_err(|e| RunError::Device(format!("arm report stream at {host}:{port}: {e}")))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn the_firmware_is_the_last_field_of_the_version_text() {
+        assert_eq!(firmware_of("7,7,XS1305HITL01,XX1305HITL01,v2.5.0"), "v2.5.0");
+        assert_eq!(firmware_of("v1.9.0"), "v1.9.0");
+        assert_eq!(firmware_of(""), "");
+    }
+
+    #[test]
+    fn the_tighter_table_is_checked_on_connect() {
+        let id = |serial: &str| ArmIdentity {
+            serial: serial.into(),
+            firmware: "v2.5.0".into(),
+            table: JointTable::for_serial(serial),
+        };
+        let mut lab = LabConfig::default();
+        lab.arm.joint_table = JointTable::Xarm7Legacy;
+        assert_eq!(
+            lab_for_arm(&lab, &id("XS1305HITL01")).arm.joint_table,
+            JointTable::Xarm7Current
+        );
+        assert_eq!(lab_for_arm(&lab, &id("XS1200000001")).arm.joint_table, JointTable::Xarm7Legacy);
+        lab.arm.joint_table = JointTable::Xarm7Current;
+        assert_eq!(
+            lab_for_arm(&lab, &id("XS1200000001")).arm.joint_table,
+            JointTable::Xarm7Current
+        );
+    }
 }
