@@ -8,7 +8,7 @@ mod light_pty;
 use std::time::Duration;
 
 use hitl_drivers::light::{DmxConfig, DmxLight, DmxResolution};
-use hitl_hal::{Error, ErrorKind, Light};
+use hitl_hal::{Error, ErrorKind, Lifecycle, Light};
 use light_pty::{eventually, PtyPeer};
 
 /// One label-6 message decoded from the byte stream: the DMX channel values (without start code).
@@ -162,4 +162,46 @@ async fn a_missing_port_is_not_found_and_named() {
     };
     assert_eq!(e.kind(), ErrorKind::NotFound, "{e}");
     assert!(e.to_string().contains("/dev/hitl-no-such-port"), "{e}");
+}
+
+/// The bug behind issue 12: a light opened in a runtime that is then dropped loses its refresh
+/// task. That must never be silent: the next health check (every tick) reports it.
+#[test]
+fn a_light_whose_runtime_is_gone_reports_it_at_the_next_health_check() {
+    let mut peer = PtyPeer::new();
+    let rt = tokio::runtime::Builder::new_current_thread().enable_all().build().unwrap();
+    let mut light = rt.block_on(DmxLight::open(&peer.path, fast())).expect("open DMX light");
+    light.health().expect("healthy while its runtime runs");
+    drop(rt);
+    let e = light.health().unwrap_err();
+    assert_eq!(e.kind(), ErrorKind::Disconnected, "{e}");
+    assert!(e.to_string().contains("task has ended"), "{e}");
+    assert!(light.set_level(0.5).is_err(), "the tick's next level is refused too");
+    drop(peer.read_some(usize::MAX, Duration::from_millis(20)));
+}
+
+/// `stop` writes the current level once more, ends the task and lets go of the port: the port
+/// can be opened again at once (serial ports are opened exclusively).
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn stop_writes_the_last_level_and_releases_the_port() {
+    let mut peer = PtyPeer::new();
+    let mut light = DmxLight::open(&peer.path, fast()).await.expect("open DMX light");
+    light.set_level(0.6).expect("set");
+    wait_frame(&mut peer, Duration::from_secs(2), |f| f.channels[0] == 153);
+    assert!(
+        DmxLight::open(&peer.path, fast()).await.is_err(),
+        "a port in use cannot be opened twice"
+    );
+    let mut stopped = tokio::task::spawn_blocking(move || {
+        let r = light.stop();
+        (r, light)
+    })
+    .await
+    .unwrap();
+    stopped.0.expect("stop finishes in time");
+    let last = wait_frame(&mut peer, Duration::from_secs(2), |_| true);
+    assert_eq!(last.channels[0], 153, "the last frame carries the level");
+    stopped.1.health().expect("a stopped light is not a faulty one");
+    let again = DmxLight::open(&peer.path, fast()).await;
+    assert!(again.is_ok(), "the port is free after stop: {:?}", again.err());
 }

@@ -12,7 +12,9 @@ use std::thread::JoinHandle;
 use std::time::Duration;
 
 use hitl_drivers::light::{TriggerBox, TriggerBoxConfig};
-use hitl_hal::{Clock, Error, ErrorKind, Inputs, Light, MonotonicClock, Trigger, TriggerLines};
+use hitl_hal::{
+    Clock, Error, ErrorKind, Inputs, Lifecycle, Light, MonotonicClock, Trigger, TriggerLines,
+};
 use light_pty::{eventually, PtyPeer};
 
 /// What the simulated box does; tests flip these while it runs.
@@ -313,4 +315,45 @@ async fn a_silent_box_fails_to_open_naming_the_port() {
     };
     assert!(matches!(e.kind(), ErrorKind::Timeout), "{e}");
     assert!(e.to_string().contains(&peer.path), "{e}");
+}
+
+/// `stop` writes what the tick queued, ends the task and lets go of the port (it can be opened
+/// again at once); stopping is not a fault, for this handle or its clones.
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn stop_writes_what_is_queued_and_releases_the_port() {
+    let peer = BoxPeer::start();
+    let mut tb = open(&peer).await;
+    let mut inputs = tb.clone();
+    tb.set_level(0.25).expect("level");
+    let mut stopping = tb.clone();
+    let r = tokio::task::spawn_blocking(move || stopping.stop()).await.unwrap();
+    r.expect("stop finishes in time");
+    let sent = eventually(Duration::from_secs(2), || {
+        peer.received().iter().any(|l| l.starts_with("L ") && l.ends_with(" 250")).then_some(())
+    })
+    .await;
+    assert!(
+        sent.is_some(),
+        "the queued level went out before the port closed: {:?}",
+        peer.received()
+    );
+    tb.health().expect("a stopped box is not a faulty one");
+    assert!(inputs.health().is_ok(), "nor are its clones");
+    let again = TriggerBox::open(&peer.path, config(), MonotonicClock::new()).await;
+    assert!(again.is_ok(), "the port is free after stop: {:?}", again.err());
+}
+
+/// A box opened in a runtime that is then dropped (the bug behind issue 12) reports it at the
+/// next call from the tick instead of going silent.
+#[test]
+fn a_box_whose_runtime_is_gone_reports_it_at_the_next_call() {
+    let peer = BoxPeer::start();
+    let rt = tokio::runtime::Builder::new_current_thread().enable_all().build().unwrap();
+    let mut tb = rt
+        .block_on(TriggerBox::open(&peer.path, config(), MonotonicClock::new()))
+        .expect("open trigger box");
+    drop(rt);
+    let e = tb.health().unwrap_err();
+    assert_eq!(e.kind(), ErrorKind::Disconnected, "{e}");
+    assert!(tb.read().is_err(), "the inputs are no longer known");
 }

@@ -167,7 +167,7 @@ impl TriggerBox {
         let tb = Self {
             shared,
             _task: Arc::new(TaskGuard { task, ended: std::sync::Mutex::new(ended) }),
-            stop_timeout: config.write_timeout * 4 + config.poll * 2,
+            stop_timeout: config.write_timeout * 4 + config.ack_timeout + config.poll * 2,
         };
         let deadline = tokio::time::Instant::now() + config.open_timeout;
         loop {
@@ -255,8 +255,8 @@ impl Lifecycle for TriggerBox {
         self.check()
     }
 
-    /// Write what is queued (a last level), close the port and end the task; every clone is
-    /// stopped with it.
+    /// Write what is queued (a last level), wait for its acknowledgements (up to the ack
+    /// timeout), close the port and end the task; every clone is stopped with it.
     fn stop(&mut self) -> Result<(), SerialError> {
         self.shared.stopping.store(true, Ordering::Release);
         let ended = match self._task.ended.lock() {
@@ -497,7 +497,9 @@ async fn box_task(
             _ = poll.tick() => {
                 let stopping = shared.stopping.load(Ordering::Acquire);
                 if let Err(f) = task.service(&mut wr).await { break Err(f); }
-                if stopping { break Ok(()); }
+                // Stopping: once what was queued is written and acknowledged (or its ack
+                // deadline has tripped a fault), so that no late `A` is left for the next opener.
+                if stopping && task.pending.is_empty() { break Ok(()); }
             }
         }
     };
