@@ -1,6 +1,7 @@
 //! The control loop against an in-process arm that follows every command exactly: the loop's
-//! logic on its own (phases, trips, stops), and the proof that the tick allocates nothing.
-//! (End-to-end runs against the MuJoCo stub are in `run_stub.rs`.)
+//! logic on its own (phases, trips, stops), and the proof that the tick allocates and frees
+//! nothing, with the fake arm and with the real `XarmClient` talking to the stub's protocol
+//! server. (End-to-end runs against the MuJoCo stub are in `run_stub.rs`.)
 
 use hitl::control::interlocks::{Interlocks, Thresholds, TripKind};
 use hitl::control::motion::{plan_move, MoveLimits};
@@ -17,10 +18,11 @@ use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
 use std::sync::Arc;
 use std::time::Duration;
 
-/// Counts allocations made on a thread while it is inside the real-time loop.
+/// Counts allocations and frees made on a thread while it is inside the real-time loop.
 struct CountingAllocator;
 
 static RT_ALLOCATIONS: AtomicU64 = AtomicU64::new(0);
+static RT_FREES: AtomicU64 = AtomicU64::new(0);
 
 // SAFETY: delegates to the system allocator unchanged; only counts.
 #[allow(unsafe_code)]
@@ -33,6 +35,9 @@ unsafe impl GlobalAlloc for CountingAllocator {
         unsafe { System.alloc(layout) }
     }
     unsafe fn dealloc(&self, ptr: *mut u8, layout: Layout) {
+        if probe::in_rt_loop() {
+            RT_FREES.fetch_add(1, Ordering::Relaxed);
+        }
         // SAFETY: same contract as the caller's.
         unsafe { System.dealloc(ptr, layout) }
     }
@@ -144,6 +149,7 @@ struct Ran {
     sent: Vec<Joints>,
     stopped: bool,
     allocations: u64,
+    frees: u64,
 }
 
 fn run(program: &Program, script: Script, operator_stop_at: Option<u64>) -> Ran {
@@ -180,10 +186,11 @@ fn run(program: &Program, script: Script, operator_stop_at: Option<u64>) -> Ran 
     };
     let io = LoopIo { reports, telemetry: NoTelemetry, status, health, stop, clock };
     let control = ControlLoop::new(program, devices, io, interlocks, RATE, &START);
-    let before = RT_ALLOCATIONS.load(Ordering::Relaxed);
+    let before = (RT_ALLOCATIONS.load(Ordering::Relaxed), RT_FREES.load(Ordering::Relaxed));
     let outcome = control.run(Duration::ZERO);
-    let allocations = RT_ALLOCATIONS.load(Ordering::Relaxed) - before;
-    Ran { outcome, sent: arm.sent, stopped: arm.stopped, allocations }
+    let allocations = RT_ALLOCATIONS.load(Ordering::Relaxed) - before.0;
+    let frees = RT_FREES.load(Ordering::Relaxed) - before.1;
+    Ran { outcome, sent: arm.sent, stopped: arm.stopped, allocations, frees }
 }
 
 static SERIAL: AtomicBool = AtomicBool::new(false);
@@ -203,12 +210,26 @@ fn serial() -> impl Drop {
 }
 
 #[test]
+fn the_counter_sees_an_allocation_and_a_free_on_the_loop_thread() {
+    // The allocation tests below can fail: a Box made and dropped with the flag up counts.
+    let _one = serial();
+    let before = (RT_ALLOCATIONS.load(Ordering::Relaxed), RT_FREES.load(Ordering::Relaxed));
+    {
+        let _rt = probe::enter_rt_loop();
+        drop(std::hint::black_box(Box::new([0u8; 64])));
+    }
+    assert_eq!(RT_ALLOCATIONS.load(Ordering::Relaxed) - before.0, 1);
+    assert_eq!(RT_FREES.load(Ordering::Relaxed) - before.1, 1);
+}
+
+#[test]
 fn a_whole_playback_sends_approach_then_trajectory_and_allocates_nothing() {
     let _one = serial();
     let p = program();
     let ran = run(&p, Script::default(), None);
     assert!(matches!(ran.outcome, Outcome::Completed { settled: true, .. }), "{:?}", ran.outcome);
     assert_eq!(ran.allocations, 0, "the tick allocated");
+    assert_eq!(ran.frees, 0, "the tick freed");
     let expected: Vec<Joints> = p.approach.iter().chain(p.playback.iter()).map(|s| s.q).collect();
     assert_eq!(
         &ran.sent[..expected.len()],
@@ -230,6 +251,7 @@ fn operator_stop_decelerates_with_a_ruckig_stop_and_exits_130() {
     assert!(stopped, "the controlled stop completed");
     assert_eq!(trip.kind.exit_code(), 130);
     assert_eq!(ran.allocations, 0, "the trip path allocated on the loop thread");
+    assert_eq!(ran.frees, 0, "the trip path freed on the loop thread");
     // After the trip the commands stop short of the program and come to rest smoothly.
     let k = trip.tick as usize;
     let tail = &ran.sent[k..];
@@ -279,4 +301,118 @@ fn an_arm_that_stops_answering_holds_and_exits_5() {
     assert!(ran.stopped, "the arm was told to stop");
     assert_eq!(ran.sent.len(), n);
     assert_eq!(trip.kind.exit_code(), 5);
+}
+
+/// A stub plant that is wherever it is told to be: the test is about the client, not physics.
+#[cfg(feature = "stub")]
+struct Follower(Joints);
+
+#[cfg(feature = "stub")]
+impl hitl_sim_stub::plant::Plant for Follower {
+    fn joints(&self) -> Joints {
+        self.0
+    }
+    fn velocities(&self) -> Joints {
+        [0.0; 7]
+    }
+    fn command(&mut self, q: &Joints) {
+        self.0 = *q;
+    }
+    fn reset(&mut self, q: &Joints) {
+        self.0 = *q;
+    }
+    fn advance(&mut self, _dt: f64) {}
+    fn time(&self) -> f64 {
+        0.0
+    }
+    fn collision(&self) -> Option<hitl_sim_stub::plant::Collision> {
+        None
+    }
+}
+
+/// The same playback through the real `XarmClient` (pipelined servo_j over TCP, replies read
+/// and counted) and the real report reader, against the stub's protocol server: the tick still
+/// allocates and frees nothing, and the stub took every setpoint.
+#[cfg(feature = "stub")]
+#[test]
+fn the_real_client_against_the_stub_allocates_and_frees_nothing_on_the_loop_thread() {
+    use hitl_drivers::xarm::XarmClient;
+    use hitl_drivers::xarm::{ClientConfig, ReportConfig, ReportKind, ReportReader, ServoReplies};
+    use hitl_hal::ArmReports;
+    use hitl_sim_stub::{Stub, StubConfig};
+
+    let _one = serial();
+    let p = program();
+    let stub = Stub::start(
+        StubConfig { initial_q: START, ..StubConfig::ephemeral() },
+        Box::new(Follower(START)),
+    )
+    .expect("stub");
+    let clock = MonotonicClock::new();
+    let config = ClientConfig {
+        servo_replies: ServoReplies::Pipelined { max_outstanding: 63 },
+        ..ClientConfig::default()
+    };
+    let mut arm = XarmClient::connect(stub.cmd_addr(), config).expect("connect");
+    let port = |kind: ReportKind| stub.report_addr(kind).expect("report port").port();
+    let mut reader = ReportReader::connect(
+        stub.cmd_addr().ip(),
+        ReportConfig {
+            port: Some(port(ReportKind::Real)),
+            codes_port: Some(port(ReportKind::Normal)),
+            clock,
+            ..ReportConfig::default()
+        },
+    )
+    .expect("reports");
+    let (slot, reports) = LatestSlot::new();
+    let done = Arc::new(AtomicBool::new(false));
+    let reading = {
+        let done = Arc::clone(&done);
+        std::thread::spawn(move || {
+            while !done.load(Ordering::Acquire) {
+                match reader.next_report() {
+                    Ok(state) => slot.publish(state),
+                    Err(_) => break,
+                }
+            }
+        })
+    };
+    arm.enable_servo().expect("enable");
+    let (_planner, stop) =
+        StopPlanner::start(MoveLimits::uniform(1.0, 4.0, 60.0), 1.0 / RATE, 5.0).expect("planner");
+    let thresholds = Thresholds {
+        report_timeout_ns: 1_000_000_000,
+        max_deviation_rad: 0.15,
+        trip_on_warning: true,
+        reply_stall_ns: 1_000_000_000,
+    };
+    let status = Arc::new(LoopStatus::default());
+    let io =
+        LoopIo { reports, telemetry: NoTelemetry, status, health: Health::default(), stop, clock };
+    let devices = Devices {
+        arm: &mut arm,
+        camera: NoCamera,
+        light: NoLight,
+        inputs: NoInputs,
+        trigger: NoTrigger,
+    };
+    let control = ControlLoop::new(&p, devices, io, Interlocks::new(thresholds), RATE, &START);
+    let before = (RT_ALLOCATIONS.load(Ordering::Relaxed), RT_FREES.load(Ordering::Relaxed));
+    let outcome = control.run(Duration::ZERO);
+    let allocations = RT_ALLOCATIONS.load(Ordering::Relaxed) - before.0;
+    let frees = RT_FREES.load(Ordering::Relaxed) - before.1;
+    arm.flush_servo_replies().expect("every reply arrives");
+    done.store(true, Ordering::Release);
+    let _ = reading.join();
+    assert!(matches!(outcome, Outcome::Completed { settled: true, .. }), "{outcome:?}");
+    assert_eq!(allocations, 0, "the tick allocated with the real client");
+    assert_eq!(frees, 0, "the tick freed with the real client");
+    assert!(
+        arm.servo_sent() >= (p.approach.len() + p.playback.len()) as u64,
+        "{}",
+        arm.servo_sent()
+    );
+    assert_eq!(arm.outstanding(), 0);
+    stub.shutdown();
 }

@@ -140,6 +140,11 @@ impl Worker {
             self.handle(frame);
             worked = true;
         }
+        // Frames the tick could not queue: freed here, off the loop thread.
+        while let Some(lost) = self.queues.discard.pop() {
+            drop(lost);
+            worked = true;
+        }
         worked
     }
 

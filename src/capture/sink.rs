@@ -1,6 +1,8 @@
 //! The tick's telemetry sink for a run: recorder queues (when recording) and the capture intake's
 //! queues. Every method is a lock-free push that never blocks or allocates; full queues drop and
 //! count (the recorder's telemetry drops its oldest, frames are counted as lost and reported).
+//! A lost frame is not dropped here, which would free its image buffers on the loop thread: it
+//! goes to the discard queue, and the intake thread frees it.
 
 use crate::control::interlocks::{Trip, TripKind};
 use crate::control::setpoint::Phase;
@@ -26,6 +28,11 @@ pub struct IntakeQueues {
     pub captures_missed: AtomicU64,
     /// Frames that found the intake queue full.
     pub frames_lost: AtomicU64,
+    /// Lost frames on their way to be freed by the intake thread, not by the tick.
+    pub discard: ArrayQueue<RgbdFrame>,
+    /// Lost frames that found the discard queue full too (the intake thread has not run for
+    /// `frames + discard` frames): leaked rather than freed on the loop thread.
+    pub frames_leaked: AtomicU64,
 }
 
 impl IntakeQueues {
@@ -37,6 +44,8 @@ impl IntakeQueues {
             frames_in: AtomicU64::new(0),
             captures_missed: AtomicU64::new(0),
             frames_lost: AtomicU64::new(0),
+            discard: ArrayQueue::new(64),
+            frames_leaked: AtomicU64::new(0),
         }
     }
 }
@@ -149,8 +158,53 @@ impl TelemetrySink for RunTelemetry {
 
     fn frame(&self, frame: RgbdFrame) {
         self.intake.frames_in.fetch_add(1, Ordering::Relaxed);
-        if self.intake.frames.push(frame).is_err() {
+        if let Err(frame) = self.intake.frames.push(frame) {
             self.intake.frames_lost.fetch_add(1, Ordering::Relaxed);
+            // Dropping it here would free its buffers on the loop thread: the intake frees it.
+            if let Err(frame) = self.intake.discard.push(frame) {
+                // The intake thread has not run for 80 frames (seconds at camera rates): leaking
+                // one frame is the lesser harm than a free on the loop thread. Counted.
+                self.intake.frames_leaked.fetch_add(1, Ordering::Relaxed);
+                std::mem::forget(frame);
+            }
         }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use hitl_hal::{CaptureRequest, Intrinsics, TimestampSource};
+
+    fn frame(tick: u64) -> RgbdFrame {
+        RgbdFrame {
+            request: CaptureRequest { tick, fired_ns: 0 },
+            device_ns: 0,
+            exposure_ns: 0,
+            timestamp: TimestampSource::HostArrival,
+            intrinsics: Intrinsics { width: 2, height: 2, fx: 1.0, fy: 1.0, cx: 1.0, cy: 1.0 },
+            color: vec![7; 12],
+            depth_m: vec![1.0; 4],
+            mask: None,
+        }
+    }
+
+    #[test]
+    fn a_frame_that_finds_the_intake_full_is_handed_over_not_freed() {
+        let intake = Arc::new(IntakeQueues::new());
+        let sink = RunTelemetry { record: None, intake: Arc::clone(&intake) };
+        for k in 0..16 {
+            sink.frame(frame(k));
+        }
+        assert_eq!(intake.frames.len(), 16);
+        let lost = frame(16);
+        let buffer = lost.color.as_ptr();
+        sink.frame(lost);
+        assert_eq!(intake.frames_lost.load(Ordering::Relaxed), 1);
+        // The very buffer is in the discard queue: the sink freed nothing.
+        let handed = intake.discard.pop().expect("handed over");
+        assert_eq!(handed.request.tick, 16);
+        assert_eq!(handed.color.as_ptr(), buffer);
+        assert_eq!(intake.frames_leaked.load(Ordering::Relaxed), 0);
     }
 }
