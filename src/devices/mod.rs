@@ -86,6 +86,7 @@ pub fn open_devices(
 ) -> Result<RunDevices, DeviceError> {
     let opened = light::open_light(&choice.light, ctx)?;
     let camera = camera::open_camera(choice.camera, &choice.stream, ctx)?;
+    #[cfg_attr(not(feature = "stub"), allow(unused_mut))]
     let mut inputs = opened.inputs;
     #[cfg(feature = "stub")]
     if let Some(sim) = &ctx.sim {
