@@ -87,6 +87,8 @@ struct Shared {
     stopping: AtomicBool,
     /// The task has ended (set by its drop guard, also when it is aborted).
     task_ended: AtomicBool,
+    /// Wakes `open` when the ping is acknowledged, an input report arrives or a fault trips.
+    open_progress: tokio::sync::Notify,
 }
 
 impl Shared {
@@ -117,6 +119,7 @@ struct EndMark {
 impl Drop for EndMark {
     fn drop(&mut self) {
         self.shared.task_ended.store(true, Ordering::Release);
+        self.shared.open_progress.notify_one();
     }
 }
 
@@ -159,6 +162,7 @@ impl TriggerBox {
             offset_rtt_ns: AtomicU64::new(u64::MAX),
             stopping: AtomicBool::new(false),
             task_ended: AtomicBool::new(false),
+            open_progress: tokio::sync::Notify::new(),
         });
         let _ = shared.commands.push(Command::Ping);
         let (alive, ended) = TaskEnd::new();
@@ -171,6 +175,9 @@ impl TriggerBox {
         };
         let deadline = tokio::time::Instant::now() + config.open_timeout;
         loop {
+            if tb.shared.task_ended.load(Ordering::Acquire) {
+                tb.shared.health.trip(Fault::TaskEnded);
+            }
             if let Some(f) = tb.shared.health.fault() {
                 return Err(SerialError::new(
                     f.kind(),
@@ -190,7 +197,8 @@ impl TriggerBox {
                     ),
                 ));
             }
-            tokio::time::sleep(Duration::from_millis(1)).await;
+            // A stored permit covers progress made since the checks above.
+            let _ = tokio::time::timeout_at(deadline, tb.shared.open_progress.notified()).await;
         }
     }
 
@@ -366,6 +374,7 @@ impl BoxTask {
                 self.update_offset(p.sent_ns, now, device_us);
                 if p.is_ping {
                     self.shared.ping_acked.store(true, Ordering::Release);
+                    self.shared.open_progress.notify_one();
                 }
                 if let Some(tick) = p.fire_tick {
                     let report = FireReport { tick, device_us, acked_ns: now };
@@ -380,6 +389,7 @@ impl BoxTask {
                     | if door_open { INPUT_DOOR } else { 0 };
                 self.shared.inputs.store(bits, Ordering::Release);
                 self.shared.inputs_at_ns.store(now, Ordering::Release);
+                self.shared.open_progress.notify_one();
             }
             BoxLine::Error { .. } => return Err(Fault::BoxError),
         }
@@ -505,5 +515,6 @@ async fn box_task(
     };
     if let Err(f) = result {
         shared.health.trip(f);
+        shared.open_progress.notify_one();
     }
 }
