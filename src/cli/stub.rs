@@ -131,6 +131,14 @@ pub fn run(args: StubArgs) -> u8 {
         phys.sim_s,
         phys.late_steps
     );
+    let c = stub.counters();
+    let load = |a: &std::sync::atomic::AtomicU64| a.load(std::sync::atomic::Ordering::Relaxed);
+    crate::errln!(
+        "hitl stub: {} commands at most 250 per second, {} of them waited for their slot (longest {:.2} ms)",
+        load(&c.commands),
+        load(&c.paced_commands),
+        load(&c.max_pace_wait_ns) as f64 * 1e-6
+    );
     stub.shutdown();
     exit::OK
 }
