@@ -1,6 +1,6 @@
-//! The servo hot path allocates nothing: encoding a servo_j into the caller's buffer, and the
-//! client's pipelined `servo_joint` (drain replies, check state bits, write) against a minimal
-//! box on loopback that answers every servo_j.
+//! The servo hot path allocates nothing: encoding a servo_j into the caller's buffer, the
+//! client's pipelined `servo_joint` (drain replies, check state bits, write) and its `stop`
+//! (set_state(4) without waiting) against a minimal box on loopback that answers everything.
 
 use hitl_drivers::xarm::codec::{
     decode_request, encode_reply, encode_servo_j, frame_len, Accept, SERVO_J_LEN,
@@ -71,6 +71,14 @@ fn pipelined_servo_joint_allocates_nothing() {
     arm.flush_servo_replies().expect("replies");
     assert_eq!(arm.servo_sent(), 510);
     assert_eq!(info.count_total, 0, "hot path allocated {} times", info.count_total);
+    let info = allocation_counter::measure(|| {
+        for _ in 0..30 {
+            arm.stop().expect("stop written");
+        }
+    });
+    assert_eq!(info.count_total, 0, "stop allocated {} times", info.count_total);
+    arm.flush_servo_replies().expect("the stops' replies");
+    assert_eq!(arm.outstanding(), 0);
     arm.shutdown();
     server.join().expect("box thread");
 }
