@@ -516,6 +516,14 @@ impl ArmLink {
     }
 }
 
+/// A run that ends early (the approach refused, a thread that would not start) stops the reader
+/// too.
+impl Drop for ArmLink {
+    fn drop(&mut self) {
+        self.close();
+    }
+}
+
 fn connect_arm(
     req: &RunRequest,
     target: &ArmTargetLink,
