@@ -2,10 +2,16 @@
 //! the devices that do not answer (exit 5 naming them) or are mis-named (exit 2).
 
 mod common;
+#[path = "../drivers/tests/light_pty/mod.rs"]
+mod light_pty;
 
 use common::hitl;
+use light_pty::PtyPeer;
 use std::io::{BufRead, BufReader};
 use std::process::{Child, Command, Stdio};
+use std::sync::atomic::{AtomicBool, Ordering};
+use std::sync::Arc;
+use std::time::{Duration, Instant};
 
 fn text(out: &std::process::Output) -> String {
     format!("{}{}", String::from_utf8_lossy(&out.stdout), String::from_utf8_lossy(&out.stderr))
@@ -90,4 +96,71 @@ fn a_misspelt_light_is_bad_input() {
     let out = hitl(&["probe", "--light", "dmxx:/dev/ttyUSB0"]);
     assert_eq!(out.status.code(), Some(2), "{}", text(&out));
     assert!(text(&out).contains("unknown light kind"), "{}", text(&out));
+}
+
+/// A trigger box on a pty: acknowledges every command and reports its inputs every 20 ms with
+/// the door open, until `done`.
+fn trigger_box_peer(mut peer: PtyPeer, done: Arc<AtomicBool>) {
+    let start = Instant::now();
+    let mut line = Vec::new();
+    let mut last = Instant::now() - Duration::from_secs(1);
+    while !done.load(Ordering::Acquire) {
+        for b in peer.read_some(1, Duration::from_millis(5)) {
+            if b != b'\n' {
+                line.push(b);
+                continue;
+            }
+            let text = String::from_utf8(std::mem::take(&mut line)).expect("ASCII");
+            let seq = text.split(' ').nth(1).unwrap_or("0").to_string();
+            peer.write(format!("A {seq} {}\n", start.elapsed().as_micros()).as_bytes());
+        }
+        if last.elapsed() >= Duration::from_millis(20) {
+            peer.write(format!("I {} 0 1\n", start.elapsed().as_micros()).as_bytes());
+            last = Instant::now();
+        }
+    }
+}
+
+#[test]
+fn probe_pings_the_trigger_box_and_prints_its_inputs() {
+    let peer = PtyPeer::new();
+    let path = peer.path.clone();
+    let done = Arc::new(AtomicBool::new(false));
+    let stop = Arc::clone(&done);
+    let thread = std::thread::spawn(move || trigger_box_peer(peer, stop));
+    let out = hitl(&["probe", "--light", &format!("trigger:{path}")]);
+    done.store(true, Ordering::Release);
+    thread.join().expect("peer");
+    let all = text(&out);
+    assert_eq!(out.status.code(), Some(0), "{all}");
+    assert!(all.contains("answered the ping; e-stop released, door OPEN"), "{all}");
+}
+
+#[test]
+fn probe_asks_the_dmx_widget_for_its_parameters() {
+    let mut peer = PtyPeer::new();
+    let path = peer.path.clone();
+    let thread = std::thread::spawn(move || {
+        // The request: label 3, two bytes of user-configuration length (0), end.
+        let got = peer.read_some(7, Duration::from_secs(5));
+        peer.write(&[0x7E, 3, 5, 0, 0x44, 0x01, 9, 1, 40, 0xE7]);
+        std::thread::sleep(Duration::from_millis(300));
+        got
+    });
+    let out = hitl(&["probe", "--light", &format!("dmx:{path}")]);
+    let got = thread.join().expect("peer");
+    let all = text(&out);
+    assert_eq!(got, vec![0x7E, 3, 2, 0, 0, 0, 0xE7], "parameters request");
+    assert_eq!(out.status.code(), Some(0), "{all}");
+    assert!(all.contains("firmware 1.68"), "{all}");
+    assert!(all.contains("break 96 us, mark-after-break 11 us, 40 packets/s"), "{all}");
+}
+
+#[test]
+fn a_serial_port_that_is_no_dmx_widget_is_named_with_exit_5() {
+    let peer = PtyPeer::new(); // answers nothing
+    let out = hitl(&["probe", "--light", &format!("dmx:{}", peer.path)]);
+    let all = text(&out);
+    assert_eq!(out.status.code(), Some(5), "{all}");
+    assert!(all.contains("no parameters reply within 500 ms"), "{all}");
 }

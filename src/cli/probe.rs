@@ -8,10 +8,12 @@
 
 use crate::exit;
 use crate::{errln, outln};
+use hitl_drivers::light::enttec::{probe_widget, Reply};
 use hitl_drivers::light::{LightSpec, SerialLight};
 use hitl_drivers::xarm::{ClientConfig, XarmClient};
 use hitl_hal::{Arm as _, Inputs as _, MonotonicClock};
 use hitl_trajectories::joint_table::JointTable;
+use std::time::Duration;
 
 /// Commission devices: list what is connected and check that each named device answers.
 #[derive(Debug, clap::Args)]
@@ -99,13 +101,31 @@ fn probe_light(spec: &LightSpec) -> Result<(), String> {
         .build()
         .map_err(|e| format!("cannot start the I/O runtime: {e}"))?;
     rt.block_on(async {
+        if let LightSpec::Dmx { port, .. } = spec {
+            // A widget answers a parameters request; a bare serial port (or a dead widget) does not.
+            let reply =
+                probe_widget(port, Duration::from_millis(500)).await.map_err(|e| e.to_string())?;
+            match reply {
+                Reply::Parameters { firmware, break_time, mab_time, rate } => outln!(
+                    "DMX widget {spec}: Enttec DMX USB Pro firmware {}.{}, break {:.0} us, \
+                     mark-after-break {:.0} us, {}",
+                    firmware >> 8,
+                    firmware & 0xFF,
+                    f64::from(break_time) * 10.67,
+                    f64::from(mab_time) * 10.67,
+                    if rate == 0 {
+                        "as fast as possible".to_string()
+                    } else {
+                        format!("{rate} packets/s")
+                    }
+                ),
+                other => outln!("DMX widget {spec}: answered ({other:?})"),
+            }
+            return Ok(());
+        }
         let light =
             SerialLight::open(spec, MonotonicClock::new()).await.map_err(|e| e.to_string())?;
         match light {
-            None => {
-                outln!("light {spec}: not a serial device, nothing to probe");
-                Ok(())
-            }
             Some(SerialLight::Trigger(mut tb)) => {
                 // `open` has already seen the ping's acknowledgement and a first input report.
                 let inputs = tb.read().map_err(|e| e.to_string())?;
@@ -119,8 +139,8 @@ fn probe_light(spec: &LightSpec) -> Result<(), String> {
                 }
                 Ok(())
             }
-            Some(SerialLight::Dmx(_)) => {
-                outln!("DMX widget {spec}: port opened (a widget sends no answer to DMX frames)");
+            _ => {
+                outln!("light {spec}: nothing to probe (not a serial device hitl probe knows)");
                 Ok(())
             }
         }
