@@ -367,11 +367,23 @@ fn a_recorder_that_cannot_write_trips_the_interlock_and_leaves_a_readable_file()
 #[test]
 fn an_orbbec_camera_that_is_not_there_fails_before_anything_moves_with_exit_5() {
     let _one = ONE_AT_A_TIME.lock().unwrap_or_else(|e| e.into_inner());
-    let run = run_with_camera("orbbec", &[]);
+    let run = run_with_camera("orbbec:software", &[]);
     let all = text(&run.out);
     assert_eq!(code(&run.out), 5, "{all}");
     assert!(all.contains("Orbbec"), "{all}");
     assert!(!all.contains("tick "), "nothing moved: {all}");
+}
+
+#[test]
+fn a_hardware_triggered_orbbec_without_the_trigger_box_is_refused_before_anything_opens() {
+    // The default Orbbec trigger is the trigger box's camera line: with the simulated light no
+    // pulse would ever reach the camera, so every capture would be missed mid-run.
+    let run = run_with_camera("orbbec", &[]);
+    let all = text(&run.out);
+    assert_eq!(code(&run.out), 2, "{all}");
+    assert!(all.contains("--camera orbbec is hardware-triggered"), "{all}");
+    assert!(all.contains("--light trigger:DEV"), "{all}");
+    assert!(!all.contains("libusb"), "the SDK was not even loaded: {all}");
 }
 
 #[test]

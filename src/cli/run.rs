@@ -41,7 +41,9 @@ pub struct RunArgs {
     /// Lab configuration (TOML). Defaults to the DreamSat-Bench enclosure.
     #[arg(long, value_name = "FILE.toml")]
     pub config: Option<PathBuf>,
-    /// Camera: sim (the stub's rendered camera), orbbec, or none.
+    /// Camera: sim (the stub's rendered camera), orbbec (hardware-triggered by the trigger box's
+    /// camera line: needs --light trigger:DEV), orbbec:hardware (the same), orbbec:software (a
+    /// model documented for software triggering, e.g. the Gemini 305), or none.
     #[arg(long, default_value = "sim", value_name = "sim|orbbec|none")]
     pub camera: CameraSpec,
     /// Light: sim, dmx:DEV[,addr=N][,16bit] (Enttec DMX USB Pro), trigger:DEV (the trigger box:

@@ -1,9 +1,11 @@
-//! `--camera sim|orbbec|none`: the choice, the stream the run asks of the camera, and the one
+//! `--camera sim|orbbec[:hardware|:software]|none`: the choice, the stream the run asks of the camera, and the one
 //! place a camera kind is opened (a new kind is its driver plus one variant and one arm here).
 
 use super::any::{Kinds, RunCamera, Unmanaged};
 use super::none::NoCamera;
 use super::{DeviceError, OpenContext};
+use hitl_drivers::light::LightSpec;
+use hitl_drivers::orbbec::TriggerChoice;
 use hitl_hal::{Intrinsics, StreamConfig};
 use std::fmt;
 use std::str::FromStr;
@@ -13,15 +15,17 @@ use std::str::FromStr;
 pub enum CameraSpec {
     /// The stub's ray-cast RGB-D camera (needs the embedded stub).
     Sim,
-    /// An Orbbec RGB-D camera through the Orbbec SDK.
-    Orbbec,
+    /// An Orbbec RGB-D camera through the Orbbec SDK, triggered as chosen: `orbbec` (hardware
+    /// where the model documents it, which every supported model does), `orbbec:hardware`, or
+    /// `orbbec:software` (only models documented for it: the Gemini 305, not the 305g).
+    Orbbec(TriggerChoice),
     /// No camera: captures are recorded as fired and no frame comes.
     None,
 }
 
 /// Why a `--camera` value was refused.
 #[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
-#[error("{0:?} is not a camera: expected sim, orbbec or none")]
+#[error("{0:?} is not a camera: expected sim, orbbec, orbbec:hardware, orbbec:software or none")]
 pub struct CameraSpecError(pub String);
 
 impl FromStr for CameraSpec {
@@ -29,7 +33,9 @@ impl FromStr for CameraSpec {
     fn from_str(s: &str) -> Result<Self, Self::Err> {
         match s {
             "sim" => Ok(CameraSpec::Sim),
-            "orbbec" => Ok(CameraSpec::Orbbec),
+            "orbbec" => Ok(CameraSpec::Orbbec(TriggerChoice::Auto)),
+            "orbbec:hardware" => Ok(CameraSpec::Orbbec(TriggerChoice::Hardware)),
+            "orbbec:software" => Ok(CameraSpec::Orbbec(TriggerChoice::Software)),
             "none" => Ok(CameraSpec::None),
             other => Err(CameraSpecError(other.to_string())),
         }
@@ -40,7 +46,9 @@ impl fmt::Display for CameraSpec {
     fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
         f.write_str(match self {
             CameraSpec::Sim => "sim",
-            CameraSpec::Orbbec => "orbbec",
+            CameraSpec::Orbbec(TriggerChoice::Auto) => "orbbec",
+            CameraSpec::Orbbec(TriggerChoice::Hardware) => "orbbec:hardware",
+            CameraSpec::Orbbec(TriggerChoice::Software) => "orbbec:software",
             CameraSpec::None => "none",
         })
     }
@@ -85,6 +93,23 @@ fn preset_intrinsics(preset: &str, size: Option<(u32, u32)>) -> Result<Intrinsic
     Ok(ORBBEC_STREAM)
 }
 
+/// Refuse a camera that cannot be triggered with the devices chosen, before anything opens: a
+/// hardware-triggered Orbbec camera (the default) takes its frames on the trigger box's camera
+/// line, so without `--light trigger:DEV` every capture would be missed and the camera would
+/// fault mid-run.
+pub fn check_trigger_wiring(camera: CameraSpec, light: &LightSpec) -> Result<(), DeviceError> {
+    match (camera, light) {
+        (CameraSpec::Orbbec(TriggerChoice::Software), _) | (_, LightSpec::Trigger { .. }) => Ok(()),
+        (CameraSpec::Orbbec(_), _) => Err(DeviceError::BadInput(format!(
+            "--camera {camera} is hardware-triggered: its sync input is driven by the trigger \
+             box's camera line, so name the box with --light trigger:DEV (docs/devices.md), or \
+             use --camera orbbec:software on a model documented for software triggering \
+             (Gemini 305)"
+        ))),
+        _ => Ok(()),
+    }
+}
+
 /// Open the camera `spec` names (not yet configured: the session configures and arms it).
 pub fn open_camera(
     spec: CameraSpec,
@@ -120,9 +145,10 @@ pub fn open_camera(
         CameraSpec::Sim => {
             return Err(DeviceError::BadInput("--camera sim needs the stub feature".into()))
         }
-        CameraSpec::Orbbec => {
+        CameraSpec::Orbbec(trigger) => {
             use hitl_drivers::orbbec::{OrbbecCamera, OrbbecOptions};
-            let cam = OrbbecCamera::open(OrbbecOptions { clock: ctx.clock, ..Default::default() })
+            let options = OrbbecOptions { clock: ctx.clock, trigger, ..Default::default() };
+            let cam = OrbbecCamera::open(options)
                 .map_err(|e| DeviceError::Failed(format!("Orbbec camera: {e}")))?;
             RunCamera {
                 dev: Box::new(Kinds::new(Unmanaged(cam))),
@@ -131,4 +157,36 @@ pub fn open_camera(
             }
         }
     })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn orbbec_trigger_choices_parse_and_print_back() {
+        for text in ["orbbec", "orbbec:hardware", "orbbec:software", "sim", "none"] {
+            let spec: CameraSpec = text.parse().expect(text);
+            assert_eq!(spec.to_string(), text);
+        }
+        assert_eq!("orbbec".parse(), Ok(CameraSpec::Orbbec(TriggerChoice::Auto)));
+        assert!("orbbec:hw".parse::<CameraSpec>().is_err());
+    }
+
+    #[test]
+    fn a_hardware_triggered_orbbec_needs_the_trigger_box() {
+        let none = LightSpec::None;
+        let tb = LightSpec::Trigger { port: "/dev/ttyACM0".into() };
+        let auto = CameraSpec::Orbbec(TriggerChoice::Auto);
+        let hw = CameraSpec::Orbbec(TriggerChoice::Hardware);
+        let sw = CameraSpec::Orbbec(TriggerChoice::Software);
+        assert!(
+            matches!(check_trigger_wiring(auto, &none), Err(DeviceError::BadInput(m)) if m.contains("--light trigger:DEV"))
+        );
+        assert!(check_trigger_wiring(hw, &LightSpec::Sim).is_err());
+        assert_eq!(check_trigger_wiring(auto, &tb), Ok(()));
+        assert_eq!(check_trigger_wiring(hw, &tb), Ok(()));
+        assert_eq!(check_trigger_wiring(sw, &none), Ok(()));
+        assert_eq!(check_trigger_wiring(CameraSpec::None, &none), Ok(()));
+    }
 }

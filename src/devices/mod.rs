@@ -84,6 +84,7 @@ pub fn open_devices(
     choice: &DeviceChoice,
     ctx: &OpenContext<'_>,
 ) -> Result<RunDevices, DeviceError> {
+    camera::check_trigger_wiring(choice.camera, &choice.light)?;
     let opened = light::open_light(&choice.light, ctx)?;
     let camera = camera::open_camera(choice.camera, &choice.stream, ctx)?;
     #[cfg_attr(not(feature = "stub"), allow(unused_mut))]
