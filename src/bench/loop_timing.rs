@@ -1,5 +1,9 @@
 //! `hitl bench loop`: how punctually the real-time thread wakes, with and without load, side by
-//! side with a plain Python loop that sleeps for the period (what the official SDK's examples do).
+//! side with the machine's floor, `cyclictest` (Debian rt-tests: SCHED_FIFO, mlockall,
+//! clock_nanosleep to absolute deadlines, the same period, priority and load), and with a plain
+//! Python loop that sleeps for the period (what the official SDK's examples do). The ratios
+//! hitl/cyclictest at p50 and p99 say how far the controller's loop is from what the machine can
+//! do (the goal: within 1.5x).
 //!
 //! The measured loop is the controller's own: [`Periodic`] against absolute deadlines, the OS
 //! settings of [`crate::rt::os`], and a tick-sized piece of work (a slot read, a servo_j encode,
@@ -107,6 +111,95 @@ fn measure_rust(opts: &LoopBenchOptions) -> Value {
     v
 }
 
+/// Percentiles from a cyclictest histogram file (`--histfile`: one `LATENCY_US COUNT` line per
+/// microsecond, `#` comments; the `# Max Latencies:` line gives the true maximum).
+fn cyclictest_percentiles(text: &str) -> Option<Value> {
+    let mut buckets = Vec::new();
+    let mut max_us = None;
+    for line in text.lines() {
+        if let Some(rest) = line.strip_prefix("# Max Latencies:") {
+            max_us = rest.trim().parse::<f64>().ok();
+            continue;
+        }
+        if line.starts_with('#') {
+            continue;
+        }
+        let mut it = line.split_whitespace();
+        let (Some(us), Some(n)) = (it.next(), it.next()) else { continue };
+        buckets.push((us.parse::<u64>().ok()?, n.parse::<u64>().ok()?));
+    }
+    let total: u64 = buckets.iter().map(|b| b.1).sum();
+    if total == 0 {
+        return None;
+    }
+    let at = |p: f64| {
+        let rank = ((total - 1) as f64 * p).round() as u64;
+        let mut seen = 0;
+        for (us, n) in &buckets {
+            seen += n;
+            if seen > rank {
+                return *us as f64;
+            }
+        }
+        buckets.last().map_or(0.0, |b| b.0 as f64)
+    };
+    Some(json!({
+        "p50_us": at(0.5),
+        "p99_us": at(0.99),
+        "p999_us": at(0.999),
+        "max_us": max_us.unwrap_or_else(|| at(1.0)),
+        "cycles": total,
+    }))
+}
+
+/// cyclictest with the loop's period, tick count, priority, memory locking and CPU, under the
+/// same load: the machine's wake-up floor (microsecond histogram; its lateness is measured like
+/// the loop's, wake-up time minus the absolute deadline).
+fn measure_cyclictest(opts: &LoopBenchOptions) -> Value {
+    let ticks = (opts.seconds * opts.rate_hz).round() as u64;
+    let interval_us = (1e6 / opts.rate_hz).round() as u64;
+    let hist = std::env::temp_dir().join(format!("hitl-cyclictest-{}.txt", std::process::id()));
+    let mut cmd = Command::new("cyclictest");
+    cmd.args(["-q", "-t", "1"])
+        .arg(format!("--interval={interval_us}"))
+        .arg(format!("--loops={ticks}"))
+        .arg("--histogram=100000")
+        .arg(format!("--histfile={}", hist.display()));
+    if opts.rt.lock_memory {
+        cmd.arg("--mlockall");
+    }
+    // cyclictest's priority 0 is the normal scheduler, as the loop's `None`.
+    cmd.arg(format!("--priority={}", opts.rt.fifo_priority.unwrap_or(0)));
+    if let Some(cpu) = opts.rt.cpu {
+        cmd.arg(format!("--affinity={cpu}"));
+    }
+    let stop = Arc::new(AtomicBool::new(false));
+    let load = if opts.load { spawn_load(&stop) } else { Vec::new() };
+    let out = cmd.output();
+    stop.store(true, Ordering::Relaxed);
+    for t in load {
+        let _ = t.join();
+    }
+    let text = std::fs::read_to_string(&hist).unwrap_or_default();
+    let _ = std::fs::remove_file(&hist);
+    match out {
+        Ok(o) if o.status.success() => cyclictest_percentiles(&text).unwrap_or_else(|| {
+            json!({ "error": format!("cyclictest wrote no histogram: {}",
+                String::from_utf8_lossy(&o.stderr).trim()) })
+        }),
+        Ok(o) => json!({ "error": format!("cyclictest failed: {}",
+            String::from_utf8_lossy(&o.stderr).trim()) }),
+        Err(e) => json!({ "error": format!(
+            "cannot run cyclictest ({e}): install Debian's rt-tests (make setup does)") }),
+    }
+}
+
+/// hitl's lateness over cyclictest's at one percentile (a 1 us floor on the divisor: cyclictest
+/// counts whole microseconds).
+fn floor_ratio(hitl: &Value, cyclictest: &Value, key: &str) -> Option<f64> {
+    Some(hitl.get(key)?.as_f64()? / cyclictest.get(key)?.as_f64()?.max(1.0))
+}
+
 /// The same loop in plain Python: `time.sleep(period)` per iteration, lateness measured against
 /// the absolute schedule the controller keeps.
 fn measure_python(opts: &LoopBenchOptions, python: &str) -> Value {
@@ -138,6 +231,7 @@ pub fn run(opts: &LoopBenchOptions) -> Value {
     for &load in loads {
         let o = LoopBenchOptions { load, ..opts.clone() };
         let rust = measure_rust(&o);
+        let floor = measure_cyclictest(&o);
         let python = opts.python.as_deref().map(|py| measure_python(&o, py));
         // The Python loop drifts (its lateness against the schedule grows without bound), so
         // the ratio compares its per-iteration jitter with hitl's wake lateness, both p99.
@@ -150,6 +244,9 @@ pub fn run(opts: &LoopBenchOptions) -> Value {
         cases.push(json!({
             "load": load,
             "hitl": rust,
+            "cyclictest": floor,
+            "p50_ratio_hitl_over_cyclictest": floor_ratio(&rust, &floor, "p50_us"),
+            "p99_ratio_hitl_over_cyclictest": floor_ratio(&rust, &floor, "p99_us"),
             "python_sleep_loop": python,
             "p99_ratio_python_jitter_over_hitl_lateness": ratio,
         }));
@@ -160,4 +257,24 @@ pub fn run(opts: &LoopBenchOptions) -> Value {
         "seconds": opts.seconds,
         "cases": cases,
     })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn cyclictest_histograms_give_percentiles() {
+        let text = "# Histogram\n000000 000000\n000010 000050\n000011 000049\n000090 000001\n\
+                    # Total: 000000100\n# Max Latencies: 00093\n";
+        let v = cyclictest_percentiles(text).expect("percentiles");
+        assert_eq!(v["p50_us"], 11.0);
+        assert_eq!(v["p99_us"], 11.0);
+        assert_eq!(v["p999_us"], 90.0);
+        assert_eq!(v["max_us"], 93.0);
+        assert_eq!(v["cycles"], 100);
+        assert!(cyclictest_percentiles("# Histogram\n").is_none());
+        let hitl = json!({ "p50_us": 16.5 });
+        assert_eq!(floor_ratio(&hitl, &v, "p50_us"), Some(1.5));
+    }
 }

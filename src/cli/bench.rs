@@ -11,7 +11,8 @@ use std::time::Duration;
 #[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
 pub enum Which {
     /// Real-time loop wake-up lateness (p50/p99/p99.9/max, overruns), idle and under load, side
-    /// by side with a plain Python sleep loop.
+    /// by side with cyclictest (the machine's floor; ratios hitl/cyclictest at p50 and p99) and a
+    /// plain Python sleep loop.
     Loop,
     /// Loading a 100 000-waypoint NPZ and time-parametrising it, side by side with numpy's load.
     Npz,

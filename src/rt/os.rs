@@ -1,5 +1,7 @@
-//! OS settings for the real-time thread (Linux): SCHED_FIFO, mlockall, CPU affinity and minimal
-//! timer slack, plus the absolute-deadline sleep. This is the FFI module of `rt`: every `unsafe`
+//! OS settings for the real-time thread (Linux): SCHED_FIFO, mlockall, CPU affinity, minimal
+//! timer slack and a zero CPU wake-up latency request (`/dev/cpu_dma_latency`, held for the rest
+//! of the process, as cyclictest does: it keeps idle cores out of deep sleep states, whose exit
+//! latency otherwise adds to every wake-up), plus the absolute-deadline sleep. This is the FFI module of `rt`: every `unsafe`
 //! block is a plain libc call on values we own, with a `SAFETY:` note.
 //!
 //! Each setting is optional and falls back when the OS refuses (no privilege, a container): the
@@ -34,6 +36,8 @@ pub struct RtReport {
     pub memory_locked: bool,
     pub cpu: Option<usize>,
     pub timer_slack_ns: Option<u64>,
+    /// The CPU wake-up latency requested through `/dev/cpu_dma_latency`, microseconds.
+    pub cpu_dma_latency_us: Option<u32>,
     /// One line per setting the OS refused, saying which and why.
     pub fallbacks: Vec<String>,
 }
@@ -52,6 +56,9 @@ impl RtReport {
         }
         if let Some(s) = self.timer_slack_ns {
             parts.push(format!("timer slack {s} ns"));
+        }
+        if let Some(l) = self.cpu_dma_latency_us {
+            parts.push(format!("CPU wake-up latency {l} us"));
         }
         parts.join(", ")
     }
@@ -105,8 +112,33 @@ pub fn apply(options: &RtOptions) -> RtReport {
             Ok(p) => report.fifo = Some(p),
             Err(why) => report.fallbacks.push(why),
         }
+        // Only a real-time run asks the whole machine to stay awake.
+        match request_cpu_dma_latency() {
+            Ok(us) => report.cpu_dma_latency_us = Some(us),
+            Err(why) => report.fallbacks.push(why),
+        }
     }
     report
+}
+
+/// The open PM QoS request: the kernel honours it while the file stays open.
+static CPU_DMA_LATENCY: std::sync::OnceLock<std::fs::File> = std::sync::OnceLock::new();
+
+/// Ask the kernel to keep every CPU's wake-up (C-state exit) latency at 0 us for the rest of the
+/// process (PM QoS through `/dev/cpu_dma_latency`; cyclictest does the same). Idempotent.
+fn request_cpu_dma_latency() -> Result<u32, String> {
+    use std::io::Write as _;
+    if CPU_DMA_LATENCY.get().is_some() {
+        return Ok(0);
+    }
+    let mut f = std::fs::OpenOptions::new()
+        .write(true)
+        .open("/dev/cpu_dma_latency")
+        .map_err(|e| format!("CPU wake-up latency unchanged (/dev/cpu_dma_latency: {e})"))?;
+    f.write_all(&0i32.to_ne_bytes())
+        .map_err(|e| format!("CPU wake-up latency unchanged (/dev/cpu_dma_latency: {e})"))?;
+    let _ = CPU_DMA_LATENCY.set(f);
+    Ok(0)
 }
 
 /// Put the calling thread on SCHED_FIFO at `priority` (clamped to 1-99). Returns the priority
