@@ -5,7 +5,7 @@
 use hitl_sim_stub::camera::Renderer;
 use hitl_sim_stub::mjcf::{self, TargetModel, LINK_BODIES};
 use hitl_sim_stub::mujoco_plant::LabModel;
-use hitl_trajectories::kinematics::{camera_pose, link_frames, DOF, JOINT_LIMITS};
+use hitl_trajectories::kinematics::{camera_pose, link_frames, DOF};
 use hitl_trajectories::lab::LabConfig;
 use mujoco_rs::prelude::{MjData, MjtObjBase};
 use nalgebra::{Isometry3, Quaternion, Translation3, UnitQuaternion, Vector3};
@@ -14,7 +14,7 @@ use rand::{RngExt, SeedableRng};
 
 fn random_q(rng: &mut Xoshiro256PlusPlus) -> [f64; DOF] {
     std::array::from_fn(|j| {
-        let (lo, hi) = JOINT_LIMITS[j];
+        let (lo, hi) = LabConfig::default().arm.joint_table.limits()[j];
         let (lo, hi) = (lo.max(-3.5), hi.min(3.5));
         rng.random_range(lo..hi)
     })

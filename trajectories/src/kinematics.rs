@@ -7,7 +7,6 @@
 //! its z axis pointing down.
 
 use crate::geometry::Capsule;
-use crate::joint_table::JointTable;
 use nalgebra::{Isometry3, Point3, Translation3, UnitQuaternion, Vector3};
 use std::f64::consts::{FRAC_PI_2, PI};
 
@@ -28,10 +27,8 @@ pub const CHAIN: [([f64; 3], f64); DOF] = [
     ([0.076, 0.097, 0.0], -FRAC_PI_2),
 ];
 
-/// The widest xArm7 joint-limit table (the first arms'). Nothing that checks or plans motion
-/// may use it: the lab's [`crate::joint_table::JointTable`] (or the connected arm's) decides.
-/// Kept for the stub's box model, which enforces the widest range a box can have.
-pub const JOINT_LIMITS: [(f64, f64); DOF] = JointTable::Xarm7Legacy.limits();
+// Joint limits: there is no single xArm7 table. The lab's `joint_table::JointTable`
+// (`arm.joint_table`) decides offline, and the connected arm's serial number on connect.
 
 /// The xArm7's published maximum joint speed, 180 deg/s.
 pub const MAX_JOINT_SPEED: f64 = PI;
@@ -66,7 +63,7 @@ pub fn camera_pose(q: &Joints, mount: &Isometry3<f64>) -> Isometry3<f64> {
     flange_pose(q) * mount
 }
 
-/// The index of a joint that is outside `limits` (a [`JointTable`]'s) shrunk by `margin`, with
+/// The index of a joint that is outside `limits` (a [`crate::joint_table::JointTable`]'s) shrunk by `margin`, with
 /// its value.
 pub fn first_joint_beyond_limits(
     q: &Joints,
@@ -162,6 +159,7 @@ mod tests {
 
     #[test]
     fn limits_with_margin() {
+        use crate::joint_table::JointTable;
         let (current, legacy) =
             (JointTable::Xarm7Current.limits(), JointTable::Xarm7Legacy.limits());
         let mut q = [0.0; DOF];
