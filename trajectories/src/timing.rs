@@ -40,7 +40,8 @@ pub const DEFAULT_RATE_HZ: f64 = 250.0;
 pub const RATE_RANGE_HZ: (f64, f64) = (50.0, 1000.0);
 
 /// The most servo_j setpoints per second an xArm control box takes (UFACTORY: servo mode
-/// accepts commands at up to 250 Hz). `hitl run` refuses a faster rate; `hitl check` warns.
+/// accepts commands at up to 250 Hz). `hitl run` refuses a faster rate (`hitl check` checks
+/// any rate in [`RATE_RANGE_HZ`]: it moves nothing).
 pub const XARM_MAX_SERVO_RATE_HZ: f64 = 250.0;
 /// Most ticks in a table (~2.2 h at 250 Hz; ~450 MB of setpoints). Longer runs are refused.
 pub const MAX_TICKS: usize = 2_000_000;
