@@ -216,8 +216,9 @@ fn an_arm_that_stops_answering_setpoints_holds_and_exits_5() {
 }
 
 /// Plays the test sweep with `--stub-fault FAULT`, a recording, no camera and `config` (the
-/// default lab when `None`); returns exit code, everything printed and the recorded event kinds.
-fn run_fault(fault: &str, config: Option<&str>) -> (i32, String, Vec<String>) {
+/// default lab when `None`); returns exit code, everything printed and the recorded events
+/// (kind, detail).
+fn run_fault(fault: &str, config: Option<&str>) -> (i32, String, Vec<(String, String)>) {
     let dir = tempfile::tempdir().expect("tempdir");
     let traj = numpy_trajectory(dir.path());
     let mcap = dir.path().join("run.mcap");
@@ -239,7 +240,11 @@ fn run_fault(fault: &str, config: Option<&str>) -> (i32, String, Vec<String>) {
     }
     let out = hitl(&args);
     let rec = read_recording(&mcap).expect("the recording stays readable");
-    (code(&out), text(&out), rec.events.iter().map(|e| e.kind.clone()).collect())
+    (
+        code(&out),
+        text(&out),
+        rec.events.iter().map(|e| (e.kind.clone(), e.detail.clone())).collect(),
+    )
 }
 
 #[test]
@@ -260,8 +265,16 @@ fn every_default_fault_trips_what_it_is_named_after_in_the_default_lab() {
     for (kind, exit, event, trip) in cases {
         let (code, all, events) = run_fault(&format!("{kind}@0.3"), None);
         assert_eq!(code, exit, "{kind}: {all}");
-        assert!(events.iter().any(|e| e == event), "{kind}: no '{event}' event in {events:?}");
+        assert!(events.iter().any(|e| e.0 == event), "{kind}: no '{event}' event in {events:?}");
         assert!(all.contains(&format!("stopped by {trip} at tick")), "{kind}: {all}");
+        // Every trip ends with the stop supervisor's verdict in the recording: confirmed when the
+        // box hears the stop and reports; not when it cannot be reached or sends no reports.
+        let confirmed = !matches!(kind, "drop-connection" | "stall-replies" | "stall-reports");
+        let verdict = if confirmed { "box stop confirmed" } else { "box stop NOT confirmed" };
+        assert!(
+            events.iter().any(|e| e.0 == "other" && e.1.starts_with(verdict)),
+            "{kind}: no '{verdict}' event in {events:?}"
+        );
     }
 }
 
