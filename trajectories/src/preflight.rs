@@ -128,6 +128,10 @@ pub struct PreflightReport {
     pub waypoints: usize,
     pub duration_s: f64,
     pub ticks: usize,
+    /// Ticks of the lead-in (from rest into a file that starts moving) and of the lead-out (to
+    /// rest from a file that ends moving), both included in `ticks` and `duration_s`.
+    pub lead_in_ticks: usize,
+    pub lead_out_ticks: usize,
     pub rate_hz: f64,
     pub speed_scale: f64,
     pub captures: usize,
@@ -172,6 +176,17 @@ pub fn check(traj: &Trajectory, table: &SetpointTable, lab: &LabConfig) -> Prefl
     let ticks = table.ticks();
     let waypoint_of =
         |tick: usize| table.waypoint_ticks.partition_point(|w| *w <= tick).saturating_sub(1);
+    let file = table.file_ticks();
+    // Where a tick is, for people: near a waypoint, or in a ramp.
+    let place = |tick: usize| {
+        if tick < file.start {
+            "in the lead-in, before waypoint 0".to_string()
+        } else if tick >= file.end {
+            format!("in the lead-out, after waypoint {}", traj.len().saturating_sub(1))
+        } else {
+            format!("near waypoint {}", waypoint_of(tick))
+        }
+    };
     let mut violations = Vec::new();
 
     // Joint rules.
@@ -234,12 +249,12 @@ pub fn check(traj: &Trajectory, table: &SetpointTable, lab: &LabConfig) -> Prefl
             violate(
                 Rule::JointLimit,
                 format!(
-                    "joint {joint} reaches {:.4} rad at tick {k} ({:.3} s, near waypoint {}): \
+                    "joint {joint} reaches {:.4} rad at tick {k} ({:.3} s, {}): \
                      outside its allowed range [{lo:.4}, {hi:.4}] rad (joint table \
                      {joint_table} less a {margin} rad margin)",
                     table.q[k][j],
                     table.time_of(k),
-                    waypoint_of(k)
+                    place(k)
                 ),
                 k,
             );
@@ -249,10 +264,10 @@ pub fn check(traj: &Trajectory, table: &SetpointTable, lab: &LabConfig) -> Prefl
                 violate(
                     rule,
                     format!(
-                        "joint {joint} {what} {peak:.4} {unit} at tick {at} ({:.3} s, near \
-                         waypoint {}) exceeds the limit {limit} {unit}",
+                        "joint {joint} {what} {peak:.4} {unit} at tick {at} ({:.3} s, {}) \
+                         exceeds the limit {limit} {unit}",
                         table.time_of(at),
-                        waypoint_of(at)
+                        place(at)
                     ),
                     at,
                 );
@@ -347,13 +362,13 @@ pub fn check(traj: &Trajectory, table: &SetpointTable, lab: &LabConfig) -> Prefl
         violations.push(Violation {
             rule: Rule::TcpSpeed,
             message: format!(
-                "TCP linear speed {:.3} m/s ({}) at tick {k} ({:.3} s, near waypoint {}) exceeds \
+                "TCP linear speed {:.3} m/s ({}) at tick {k} ({:.3} s, {}) exceeds \
                  limits.tcp_speed_m_s = {} m/s (the control box stops servo_j with error 60 \
                  above {} m/s)",
                 tcp_speed.peak_m_s,
                 tcp_speed.point,
                 tcp_speed.time_s,
-                waypoint_of(k),
+                place(k),
                 tcp_speed.limit_m_s,
                 crate::lab::SERVO_J_TCP_SPEED_LIMIT
             ),
@@ -383,11 +398,7 @@ pub fn check(traj: &Trajectory, table: &SetpointTable, lab: &LabConfig) -> Prefl
             };
             violations.push(Violation {
                 rule,
-                message: format!(
-                    "{what} at tick {k} ({:.3} s, near waypoint {})",
-                    table.time_of(k),
-                    waypoint_of(k)
-                ),
+                message: format!("{what} at tick {k} ({:.3} s, {})", table.time_of(k), place(k)),
                 tick: k,
                 time_s: table.time_of(k),
                 waypoint: waypoint_of(k),
@@ -432,6 +443,8 @@ pub fn check(traj: &Trajectory, table: &SetpointTable, lab: &LabConfig) -> Prefl
         waypoints: traj.len(),
         duration_s: table.duration_s,
         ticks,
+        lead_in_ticks: table.lead_in_ticks,
+        lead_out_ticks: table.lead_out_ticks,
         rate_hz: table.rate_hz,
         speed_scale: table.speed_scale,
         captures: traj.capture_count(),
@@ -442,6 +455,53 @@ pub fn check(traj: &Trajectory, table: &SetpointTable, lab: &LabConfig) -> Prefl
         violations,
         warnings,
     }
+}
+
+/// Rules a slower playback always cures: per joint, velocity scales with the speed scale `s`,
+/// acceleration with `s^2`, jerk with `s^3` and the per-tick step with `s`.
+const SCALABLE: [Rule; 4] = [Rule::Velocity, Rule::Acceleration, Rule::Jerk, Rule::Step];
+
+/// The largest speed scale at which the file's own ticks meet every scalable limit, when `report`
+/// (of `table`) refuses it for velocity, acceleration, jerk or step only; `None` when it is safe
+/// or refused for anything slowing down cannot be trusted to cure (limits, clearances, TCP).
+///
+/// From the scaling laws, over the file's ticks (the lead-in and lead-out are planned within the
+/// limits at any scale): `s = time_scale * min_j min(v_max/v, sqrt(a_max/a), cbrt(j_max/j),
+/// step_max/step)`, `time_scale` being the one the table was built at. The value is exact for the
+/// continuous motion; ticks fall at other trajectory times once stretched, so the caller confirms
+/// it with a second preflight and steps down slightly when rounding fails it.
+pub fn speed_scale_to_pass(
+    table: &SetpointTable,
+    report: &PreflightReport,
+    lab: &LabConfig,
+) -> Option<f64> {
+    if report.violations.is_empty() || report.violations.iter().any(|v| !SCALABLE.contains(&v.rule))
+    {
+        return None;
+    }
+    let file = table.file_ticks();
+    let l = &lab.limits;
+    let mut factor = f64::INFINITY;
+    for j in 0..DOF {
+        let peak = |x: &[[f64; DOF]]| x[file.clone()].iter().fold(0.0f64, |m, v| m.max(v[j].abs()));
+        let step =
+            table.q[file.clone()].windows(2).fold(0.0f64, |m, w| m.max((w[1][j] - w[0][j]).abs()));
+        let ratios = [
+            l.velocity_rad_s[j] / peak(&table.qd),
+            (l.acceleration_rad_s2[j] / peak(&table.qdd)).sqrt(),
+            (l.jerk_rad_s3[j] / peak(&table.jerk)).cbrt(),
+            l.max_step_rad / step,
+        ];
+        for r in ratios {
+            // A zero peak gives infinity (no constraint); NaN can never pass.
+            if r.is_nan() {
+                return None;
+            }
+            factor = factor.min(r);
+        }
+    }
+    let s = table.time_scale * factor;
+    (s.is_finite() && s > 0.0 && s < table.speed_scale).then_some(s)
 }
 
 #[cfg(test)]

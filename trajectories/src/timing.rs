@@ -95,6 +95,27 @@ pub struct SetpointTable {
     /// Light level per tick: the level of the latest waypoint whose tick is at or before this
     /// one (held, not blended). `None` when the trajectory has no light schedule.
     pub light: Option<Vec<f32>>,
+    /// Ticks of lead-in before the first waypoint's tick: a planned move from rest into the
+    /// file's first state (0 when the file starts at rest). See [`SetpointTable::with_ramps`].
+    pub lead_in_ticks: usize,
+    /// Ticks of lead-out after the last waypoint's tick, ending at rest (0 when the file ends at
+    /// rest).
+    pub lead_out_ticks: usize,
+}
+
+/// A commanded joint state (position, velocity, acceleration) in playback time.
+#[derive(Debug, Clone, Copy, PartialEq, Default)]
+pub struct JointState {
+    pub q: Joints,
+    pub qd: Joints,
+    pub qdd: Joints,
+}
+
+impl JointState {
+    /// True when velocity and acceleration are zero on every joint.
+    pub fn at_rest(&self) -> bool {
+        self.qd.iter().chain(self.qdd.iter()).all(|x| *x == 0.0)
+    }
 }
 
 impl SetpointTable {
@@ -134,7 +155,7 @@ impl SetpointTable {
         let time_scale = span / duration_s;
         let ticks = steps + 1;
 
-        let knots = Knots::new(traj);
+        let knots = Knots::new(traj, boundary(traj, true), boundary(traj, false));
         let mut q = Vec::with_capacity(ticks);
         let mut qd = Vec::with_capacity(ticks);
         let mut qdd = Vec::with_capacity(ticks);
@@ -151,8 +172,8 @@ impl SetpointTable {
             }
             if k == steps {
                 q.push(traj.qpos[last]);
-                qd.push([0.0; DOF]);
-                qdd.push([0.0; DOF]);
+                qd.push(knots.v[last].map(|x| x * time_scale));
+                qdd.push(knots.a[last].map(|x| x * time_scale * time_scale));
                 let (_, _, _, j) = poly.eval(1.0);
                 jerk.push(j.map(|x| x * time_scale.powi(3)));
                 continue;
@@ -202,7 +223,96 @@ impl SetpointTable {
             waypoint_ticks,
             captures,
             light,
+            lead_in_ticks: 0,
+            lead_out_ticks: 0,
         })
+    }
+
+    /// The ticks that play the file's own waypoints (the lead-in and lead-out excluded).
+    pub fn file_ticks(&self) -> std::ops::Range<usize> {
+        self.lead_in_ticks..self.ticks() - self.lead_out_ticks
+    }
+
+    /// The commanded state at tick `k`.
+    pub fn state(&self, k: usize) -> JointState {
+        JointState { q: self.q[k], qd: self.qd[k], qdd: self.qdd[k] }
+    }
+
+    /// The file's first state (its first waypoint's tick), in playback time.
+    pub fn file_start(&self) -> JointState {
+        self.state(self.file_ticks().start)
+    }
+
+    /// The file's last state (its last waypoint's tick), in playback time.
+    pub fn file_end(&self) -> JointState {
+        self.state(self.file_ticks().end - 1)
+    }
+
+    /// Splice a lead-in before the file's first tick and a lead-out after its last: `lead_in`
+    /// ends one tick before the file's first state (its first sample at rest), `lead_out` starts
+    /// one tick after the file's last state (its last sample at rest). Jerk on ramp ticks is the
+    /// backward difference of acceleration (the planner's own jerk is bounded by its limit, so
+    /// this is too). Waypoint and capture ticks move by the lead-in; the light holds its first
+    /// level through the lead-in and its last through the lead-out. The file's ticks keep their
+    /// values bit for bit.
+    pub fn with_ramps(mut self, lead_in: &[JointState], lead_out: &[JointState]) -> Self {
+        let (n_in, n_out) = (lead_in.len(), lead_out.len());
+        if n_in == 0 && n_out == 0 {
+            return self;
+        }
+        let dt = self.dt;
+        let ramp_jerk = |prev: &Joints, a: &Joints| -> Joints {
+            std::array::from_fn(|j| (a[j] - prev[j]) / dt)
+        };
+        let total = self.ticks() + n_in + n_out;
+        let (mut q, mut qd, mut qdd, mut jerk) = (
+            Vec::with_capacity(total),
+            Vec::with_capacity(total),
+            Vec::with_capacity(total),
+            Vec::with_capacity(total),
+        );
+        let mut prev_a = [0.0; DOF];
+        for s in lead_in {
+            q.push(s.q);
+            qd.push(s.qd);
+            qdd.push(s.qdd);
+            jerk.push(ramp_jerk(&prev_a, &s.qdd));
+            prev_a = s.qdd;
+        }
+        q.append(&mut self.q);
+        qd.append(&mut self.qd);
+        qdd.append(&mut self.qdd);
+        jerk.append(&mut self.jerk);
+        let mut prev_a = qdd.last().copied().unwrap_or([0.0; DOF]);
+        for s in lead_out {
+            q.push(s.q);
+            qd.push(s.qd);
+            qdd.push(s.qdd);
+            jerk.push(ramp_jerk(&prev_a, &s.qdd));
+            prev_a = s.qdd;
+        }
+        for w in &mut self.waypoint_ticks {
+            *w += n_in;
+        }
+        for c in &mut self.captures {
+            c.tick += n_in;
+        }
+        if let Some(light) = &mut self.light {
+            let (first, last) = (light[0], light[light.len() - 1]);
+            let mut out = Vec::with_capacity(total);
+            out.extend(std::iter::repeat_n(first, n_in));
+            out.append(light);
+            out.extend(std::iter::repeat_n(last, n_out));
+            *light = out;
+        }
+        self.q = q;
+        self.qd = qd;
+        self.qdd = qdd;
+        self.jerk = jerk;
+        self.lead_in_ticks += n_in;
+        self.lead_out_ticks += n_out;
+        self.duration_s = (total - 1) as f64 * dt;
+        self
     }
 
     /// Number of ticks (setpoints).
@@ -216,6 +326,70 @@ impl SetpointTable {
     }
 }
 
+/// The file's own velocity and acceleration at one end, per joint, in trajectory time.
+#[derive(Debug, Clone, Copy, PartialEq)]
+struct Boundary {
+    v: Joints,
+    a: Joints,
+}
+
+/// Fewest waypoints from which an end's motion is estimated; shorter files are taken at rest.
+const BOUNDARY_POINTS: usize = 5;
+/// Below these an end joint is at rest whatever the data says, rad/s and rad/s^2 (numerical
+/// noise of exact rest data).
+const REST_FLOOR: (f64, f64) = (1e-9, 1e-7);
+/// An end velocity or acceleration is taken from the data when it is this many times its
+/// estimation error (known to about 1 %).
+const BOUNDARY_TRUST: f64 = 100.0;
+
+/// The file's own velocity and acceleration at its start (`start`) or end, or `None` when the
+/// data does not pin them down well: that end plays rest to rest, as always.
+///
+/// The estimate is the derivative at the end of the cubic through the four end waypoints (Newton
+/// divided differences, any spacing). Its error is about the fourth divided difference `D` of the
+/// five end waypoints times the node products: `|D| |d1 d2 d3|` for the velocity and
+/// `2 |D| |d1 d2 + d1 d3 + d2 d3|` for the acceleration (`di` the times of waypoints 1..3 from the
+/// end). A joint's velocity (acceleration) is taken when it exceeds [`BOUNDARY_TRUST`] times its
+/// error and [`REST_FLOOR`], else it is zero; the end moves when any joint's does. Densely
+/// sampled motion (a pipeline's 100 Hz: errors ~1e-8) is taken as written; coarse hand-made
+/// waypoints, whose ends the data cannot resolve to a percent, stay rest to rest (pinning their
+/// ends costs little: the jerk it adds scales with the end state over the end segment's length).
+fn boundary(traj: &Trajectory, start: bool) -> Option<Boundary> {
+    let n = traj.t.len();
+    if n < BOUNDARY_POINTS {
+        return None;
+    }
+    let idx: [usize; BOUNDARY_POINTS] = std::array::from_fn(|i| if start { i } else { n - 1 - i });
+    let x: [f64; BOUNDARY_POINTS] = idx.map(|i| traj.t[i]);
+    let d = [x[0] - x[1], x[0] - x[2], x[0] - x[3]];
+    let err_v = (d[0] * d[1] * d[2]).abs();
+    let err_a = 2.0 * (d[0] * d[1] + d[0] * d[2] + d[1] * d[2]).abs();
+    let mut out = Boundary { v: [0.0; DOF], a: [0.0; DOF] };
+    let mut moving = false;
+    for j in 0..DOF {
+        // Divided-difference table, in place.
+        let mut c: [f64; BOUNDARY_POINTS] = idx.map(|i| traj.qpos[i][j]);
+        for level in 1..BOUNDARY_POINTS {
+            for i in (level..BOUNDARY_POINTS).rev() {
+                c[i] = (c[i] - c[i - 1]) / (x[i] - x[i - level]);
+            }
+        }
+        let v = c[1] + c[2] * d[0] + c[3] * d[0] * d[1];
+        let a = 2.0 * c[2] + 2.0 * c[3] * (d[0] + d[1]);
+        let tol_v = (BOUNDARY_TRUST * c[4].abs() * err_v).max(REST_FLOOR.0);
+        let tol_a = (BOUNDARY_TRUST * c[4].abs() * err_a).max(REST_FLOOR.1);
+        if v.abs() > tol_v {
+            out.v[j] = v;
+            moving = true;
+        }
+        if a.abs() > tol_a {
+            out.a[j] = a;
+            moving = true;
+        }
+    }
+    moving.then_some(out)
+}
+
 /// Velocity and acceleration at every waypoint, per joint (in trajectory time).
 struct Knots {
     v: Vec<Joints>,
@@ -223,9 +397,10 @@ struct Knots {
 }
 
 impl Knots {
-    /// Knot velocities and accelerations of the clamped cubic spline through the waypoints (zero
-    /// velocity at both ends), then zero acceleration at both ends.
-    fn new(traj: &Trajectory) -> Self {
+    /// Knot velocities and accelerations of the clamped cubic spline through the waypoints, its
+    /// end velocities clamped to the file's own (see [`boundary`]; zero at an end at rest), and
+    /// the file's own accelerations at both ends (zero at an end at rest).
+    fn new(traj: &Trajectory, start: Option<Boundary>, end: Option<Boundary>) -> Self {
         let n = traj.t.len();
         let h: Vec<f64> = traj.t.windows(2).map(|w| w[1] - w[0]).collect();
         let mut v = vec![[0.0; DOF]; n];
@@ -245,6 +420,13 @@ impl Knots {
                 rhs[i] =
                     6.0 * (if i + 1 < n { d(i) } else { 0.0 } - if i > 0 { d(i - 1) } else { 0.0 });
             }
+            // Clamped ends: the first and last rows take the end velocities.
+            if let Some(b) = &start {
+                rhs[0] -= 6.0 * b.v[j];
+            }
+            if let Some(b) = &end {
+                rhs[n - 1] += 6.0 * b.v[j];
+            }
             // Forward sweep.
             for i in 1..n {
                 let w = h[i - 1] / diag[i - 1];
@@ -259,6 +441,12 @@ impl Knots {
             for i in 1..n - 1 {
                 v[i][j] = d(i) - h[i] * (2.0 * m[i] + m[i + 1]) / 6.0;
                 a[i][j] = m[i];
+            }
+        }
+        for (b, i) in [(start, 0), (end, n - 1)] {
+            if let Some(b) = b {
+                v[i] = b.v;
+                a[i] = b.a;
             }
         }
         Knots { v, a }
@@ -451,6 +639,85 @@ mod tests {
         );
         let light = table.light.expect("light");
         assert_eq!((light[49], light[50], light[149], light[150]), (0.0, 0.5, 0.5, 1.0));
+    }
+
+    /// A joint-1 sine around a comfortable pose, `hz` waypoints per second over `span` seconds,
+    /// starting at phase `phase`: moving at both ends.
+    fn sine(hz: f64, span: f64, phase: f64) -> (Trajectory, impl Fn(f64) -> (f64, f64, f64)) {
+        let (amp, w) = (0.1, 2.0 * std::f64::consts::PI * 0.2);
+        let n = (span * hz).round() as usize + 1;
+        let t: Vec<f64> = (0..n).map(|i| i as f64 / hz).collect();
+        let qpos = t
+            .iter()
+            .map(|x| {
+                let mut q = [0.0, 0.3, 0.0, 1.2, 0.0, 0.9, 0.0];
+                q[0] = amp * (w * x + phase).sin();
+                q
+            })
+            .collect();
+        let exact = move |x: f64| {
+            let a = w * x + phase;
+            (amp * a.sin(), amp * w * a.cos(), -amp * w * w * a.sin())
+        };
+        (Trajectory { qpos, t, ..Default::default() }, exact)
+    }
+
+    #[test]
+    fn a_file_that_starts_and_ends_moving_plays_its_own_motion_to_the_ends() {
+        // 0.1 rad, 0.2 Hz, 100 Hz samples, 6 s: moving at 0.126 rad/s at both ends.
+        let (traj, exact) = sine(100.0, 6.0, 0.0);
+        let table = SetpointTable::build(&traj, 250.0, 1.0).expect("table");
+        assert_eq!((table.lead_in_ticks, table.lead_out_ticks), (0, 0));
+        let mut worst = [0.0f64; 3];
+        for k in 0..table.ticks() {
+            let (p, v, a) = exact(table.time_of(k));
+            worst[0] = worst[0].max((table.q[k][0] - p).abs());
+            worst[1] = worst[1].max((table.qd[k][0] - v).abs());
+            worst[2] = worst[2].max((table.qdd[k][0] - a).abs());
+        }
+        assert!(worst[0] < 1e-9 && worst[1] < 1e-6 && worst[2] < 1e-3, "{worst:?}");
+        // The ends carry the file's own velocity; jerk stays near the sine's 0.2 rad/s^3.
+        assert!((table.qd[0][0] - exact(0.0).1).abs() < 1e-6);
+        let peak_jerk = table.jerk.iter().fold(0.0f64, |m, j| m.max(j[0].abs()));
+        assert!(peak_jerk < 1.0, "{peak_jerk}");
+        // The other joints hold still: exactly at rest.
+        assert!(table.qd.iter().all(|v| v[1..].iter().all(|x| *x == 0.0)));
+    }
+
+    #[test]
+    fn a_file_that_ends_at_rest_with_acceleration_keeps_its_acceleration() {
+        // Starts at a crest (velocity 0, acceleration -0.158 rad/s^2), ends moving.
+        let (traj, exact) = sine(100.0, 2.0, std::f64::consts::FRAC_PI_2);
+        let table = SetpointTable::build(&traj, 250.0, 1.0).expect("table");
+        assert_eq!(table.qd[0][0], 0.0);
+        assert!((table.qdd[0][0] - exact(0.0).2).abs() < 1e-4, "{}", table.qdd[0][0]);
+    }
+
+    #[test]
+    fn ramps_splice_around_the_file_ticks() {
+        let (traj, _) = sine(100.0, 1.0, 0.0);
+        let table = SetpointTable::build(&traj, 250.0, 1.0).expect("table");
+        let file = table.clone();
+        let rest = JointState { q: table.q[0], ..Default::default() };
+        let table = table.with_ramps(&[rest, rest], &[rest; 3]);
+        assert_eq!((table.lead_in_ticks, table.lead_out_ticks), (2, 3));
+        assert_eq!(table.ticks(), file.ticks() + 5);
+        assert_eq!(table.file_ticks(), 2..file.ticks() + 2);
+        assert_eq!(table.q[2..file.ticks() + 2], file.q[..]);
+        assert_eq!(table.waypoint_ticks[0], 2);
+        assert!((table.duration_s - (table.ticks() - 1) as f64 * table.dt).abs() < 1e-12);
+        assert_eq!(table.file_start(), file.state(0));
+    }
+
+    #[test]
+    fn coarse_or_resting_ends_stay_rest_to_rest() {
+        // sin^4 and a dwell at both ends: the estimate cannot be told from rest.
+        for traj in [wavy(21, 0.1), wavy(6, 0.2)] {
+            assert!(boundary(&traj, true).is_none() && boundary(&traj, false).is_none());
+        }
+        let (moving, _) = sine(100.0, 1.0, 0.0);
+        let b = boundary(&moving, true).expect("moving start");
+        assert!((b.v[0] - 0.1 * 2.0 * std::f64::consts::PI * 0.2).abs() < 1e-8, "{:?}", b.v);
     }
 
     #[test]

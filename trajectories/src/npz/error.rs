@@ -34,6 +34,23 @@ pub enum NpzError {
     /// A required key is absent.
     #[error("key '{key}' is missing (required)")]
     Missing { key: &'static str },
+    /// No `t` and no waypoint rate to derive it from.
+    #[error(
+        "key 't' is missing: the file gives no waypoint times. If its waypoints are sampled at a \
+         fixed rate, give that rate with --waypoint-rate HZ (waypoint i plays at i / HZ seconds)"
+    )]
+    MissingTime,
+    /// A waypoint rate given for a file that has its own `t`.
+    #[error(
+        "--waypoint-rate {rate} Hz was given, but the file has its own key 't': drop \
+         --waypoint-rate (it is only for files without 't')"
+    )]
+    RateWithTime { rate: f64 },
+    /// A waypoint rate that is not a positive finite number of waypoints per second.
+    #[error(
+        "--waypoint-rate {rate} Hz is refused: it must be a positive, finite rate up to {max} Hz"
+    )]
+    WaypointRate { rate: f64, max: f64 },
     /// Fewer than two waypoints.
     #[error("key 'qpos': {n} waypoint(s); a trajectory needs at least 2")]
     TooFew { n: usize },
@@ -100,7 +117,11 @@ impl NpzError {
             | NpzError::Encode { key, .. } => Some(key),
             NpzError::Missing { key } => Some(key),
             NpzError::TooFew { .. } => Some("qpos"),
-            NpzError::NotIncreasing { .. } | NpzError::NegativeStart { .. } => Some("t"),
+            NpzError::NotIncreasing { .. }
+            | NpzError::NegativeStart { .. }
+            | NpzError::MissingTime
+            | NpzError::RateWithTime { .. }
+            | NpzError::WaypointRate { .. } => Some("t"),
             NpzError::LightRange { .. } => Some("light"),
             NpzError::Read { .. } | NpzError::Write { .. } | NpzError::NotZip { .. } => None,
         }

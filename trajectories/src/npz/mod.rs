@@ -34,11 +34,24 @@ pub struct Loaded {
     pub warnings: Vec<String>,
 }
 
+/// How to read a file beyond the schema itself.
+#[derive(Debug, Clone, Copy, PartialEq, Default)]
+pub struct LoadOptions {
+    /// Waypoints per second of a file without `t` (waypoint `i` at `i / rate` seconds); `None`
+    /// requires `t`. Refused for a file that has `t`.
+    pub waypoint_rate_hz: Option<f64>,
+}
+
 /// Load and validate an NPZ trajectory file.
 pub fn load(path: &Path) -> Result<Loaded, NpzError> {
+    load_with(path, &LoadOptions::default())
+}
+
+/// Load and validate an NPZ trajectory file, with `options`.
+pub fn load_with(path: &Path, options: &LoadOptions) -> Result<Loaded, NpzError> {
     let file = std::fs::File::open(path)
         .map_err(|source| NpzError::Read { path: path.display().to_string(), source })?;
-    load_reader(BufReader::new(file))
+    load_reader_with(BufReader::new(file), options)
 }
 
 /// Load and validate an NPZ trajectory held in memory.
@@ -48,9 +61,17 @@ pub fn load_bytes(bytes: &[u8]) -> Result<Loaded, NpzError> {
 
 /// Load and validate an NPZ trajectory from any seekable reader.
 pub fn load_reader<R: Read + Seek>(reader: R) -> Result<Loaded, NpzError> {
+    load_reader_with(reader, &LoadOptions::default())
+}
+
+/// Load and validate an NPZ trajectory from any seekable reader, with `options`.
+pub fn load_reader_with<R: Read + Seek>(
+    reader: R,
+    options: &LoadOptions,
+) -> Result<Loaded, NpzError> {
     let mut warnings = Vec::new();
     let arrays = read::read_archive(reader, &mut warnings)?;
-    let trajectory = schema::build(arrays, &mut warnings)?;
+    let trajectory = schema::build(arrays, options.waypoint_rate_hz, &mut warnings)?;
     Ok(Loaded { trajectory, warnings })
 }
 

@@ -30,25 +30,44 @@ pub fn expected_dtype(key: &str) -> &'static str {
     KEYS.iter().find(|(k, _)| *k == key).map_or("a schema dtype", |(_, d)| d)
 }
 
+/// Highest `--waypoint-rate` accepted, Hz.
+pub const MAX_WAYPOINT_RATE_HZ: f64 = 100_000.0;
+
 /// Build the trajectory from decoded arrays, checking shapes and dtypes per key, then values
-/// with [`validate`].
+/// with [`validate`]. A file without `t` takes `t[i] = i / waypoint_rate_hz` when a rate is
+/// given and is refused ([`NpzError::MissingTime`]) when not; a rate for a file with `t` is
+/// refused too ([`NpzError::RateWithTime`]), so the file's own times are never silently replaced.
 pub fn build(
     mut arrays: BTreeMap<String, RawArray>,
+    waypoint_rate_hz: Option<f64>,
     warnings: &mut Vec<String>,
 ) -> Result<Trajectory, NpzError> {
+    if let Some(rate) = waypoint_rate_hz {
+        if !(rate > 0.0 && rate <= MAX_WAYPOINT_RATE_HZ) {
+            return Err(NpzError::WaypointRate { rate, max: MAX_WAYPOINT_RATE_HZ });
+        }
+    }
     let qpos = arrays.remove("qpos").ok_or(NpzError::Missing { key: "qpos" })?;
-    let t = arrays.remove("t").ok_or(NpzError::Missing { key: "t" })?;
+    let t = arrays.remove("t");
     let (n, qrows) = rows::<DOF>("qpos", &qpos)?;
     if n < 2 {
         return Err(NpzError::TooFew { n });
     }
-    if matches!(t.data, Data::F32(_)) {
-        warnings.push(
-            "key 't' is float32: times keep ~7 significant digits; the schema asks for float64"
-                .into(),
-        );
-    }
-    let t = column("t", &t, n)?;
+    let t = match (t, waypoint_rate_hz) {
+        (Some(_), Some(rate)) => return Err(NpzError::RateWithTime { rate }),
+        (None, None) => return Err(NpzError::MissingTime),
+        (None, Some(rate)) => (0..n).map(|i| i as f64 / rate).collect(),
+        (Some(t), None) => {
+            if matches!(t.data, Data::F32(_)) {
+                warnings.push(
+                    "key 't' is float32: times keep ~7 significant digits; the schema asks for \
+                     float64"
+                        .into(),
+                );
+            }
+            column("t", &t, n)?
+        }
+    };
     let capture = match arrays.remove("capture") {
         None => None,
         Some(a) => {
