@@ -20,6 +20,14 @@ pub enum Phase {
     Playback,
     /// A controlled (jerk-limited) stop.
     Stop,
+    /// The planned move from rest into the first waypoint's motion (a trajectory that starts
+    /// moving).
+    #[serde(rename = "lead_in")]
+    LeadIn,
+    /// The planned move from the last waypoint's motion to rest (a trajectory that ends moving),
+    /// and the hold at its end while the arm settles.
+    #[serde(rename = "lead_out")]
+    LeadOut,
 }
 
 /// `/arm/setpoint`: the setpoint the tick sent to the arm.

@@ -117,3 +117,33 @@ fn report_of_a_synthetic_run() {
     let svg = std::fs::read_to_string(out.join("camera_path.svg")).expect("svg");
     assert!(svg.contains("x-z"));
 }
+
+#[test]
+fn lead_in_and_lead_out_are_phases_of_their_own_in_the_recording_and_the_summary() {
+    let dir = tempfile::tempdir().expect("tempdir");
+    let path = dir.path().join("run.mcap");
+    let (handle, tel) = Recorder::spawn(&path, &meta()).expect("spawn");
+    let phases =
+        [(Phase::Approach, 5), (Phase::LeadIn, 3), (Phase::Playback, 10), (Phase::LeadOut, 4)];
+    let mut k = 0u64;
+    for (phase, n) in phases {
+        for _ in 0..n {
+            let t_ns = 1_000_000_000 + k * 4_000_000;
+            tel.push_setpoint(&SetpointMsg { tick: k, t_ns, phase, q: [0.1; 7], qd: [0.0; 7] });
+            k += 1;
+        }
+    }
+    handle.finish().expect("finish");
+    let rec = reader::read_recording(&path).expect("read");
+    let read: Vec<Phase> = rec.setpoints.iter().map(|s| s.phase).collect();
+    assert_eq!(read[5..8], [Phase::LeadIn; 3]);
+    assert_eq!(read[18..], [Phase::LeadOut; 4]);
+    let s = report::summarize(&rec);
+    let by = |name: &str| s.setpoints_by_phase.get(name).copied();
+    assert_eq!((by("approach"), by("lead_in")), (Some(5), Some(3)));
+    assert_eq!((by("playback"), by("lead_out")), (Some(10), Some(4)));
+    let out = dir.path().join("report");
+    write_report(&path, Some(&out)).expect("report");
+    let summary = std::fs::read_to_string(out.join("summary.json")).expect("summary");
+    assert!(summary.contains("\"lead_in\":3") || summary.contains("\"lead_in\": 3"), "{summary}");
+}
