@@ -66,6 +66,24 @@ bq = q.copy(); bq[8:13, 3] = -0.3; save("joint4_low.npz", qpos=bq, t=t)
 # but 0.019 rad per tick at 50 Hz (limit 0.01).
 q2 = np.stack([LOOK, LOOK]); q2[1, 0] += 0.5
 save("fast_step.npz", qpos=q2, t=np.array([0.0, 1.0]))
+
+# Files from another pipeline: sampled at 100 Hz from a slow sine (0.1 rad, 0.2 Hz) of joint 1,
+# starting and ending in the middle of the motion.
+def sine(span, phase):
+    ts = np.arange(int(round(span * 100)) + 1) / 100.0
+    qs = np.tile(LOOK, (len(ts), 1)); qs[:, 0] += 0.1 * np.sin(2 * np.pi * 0.2 * ts + phase)
+    return ts, qs
+ts, qs = sine(6.0, 0.0)
+save("moving_sine.npz", qpos=qs, t=ts)
+save("moving_sine_no_t.npz", qpos=qs)
+# From crest to trough: at rest at both ends, but accelerating (0.158 rad/s^2).
+tc, qc = sine(2.5, np.pi / 2)
+save("crest_to_trough.npz", qpos=qc, t=tc)
+# Too fast for the lab: joint 7 swings 0.8 rad and back in 1 s (2.51 rad/s, 15.8 rad/s^2,
+# 99 rad/s^3 against limits of 1, 4 and 60).
+tf = np.linspace(0.0, 1.0, 101)
+qf = np.tile(LOOK, (len(tf), 1)); qf[:, 6] += 0.8 * np.sin(np.pi * tf) ** 2
+save("too_fast.npz", qpos=qf, t=tf)
 "#;
 
 fn python() -> PathBuf {
@@ -267,4 +285,89 @@ fn a_file_hitl_writes_checks_like_numpys() {
     let ours = fixtures().join("ours.npz");
     hitl_trajectories::npz::save(&ours, &numpy.trajectory, true).expect("save");
     expect("ours.npz", &[], 0, &["SAFE", "21 waypoints"]);
+}
+
+#[test]
+fn a_file_that_starts_and_ends_moving_plays_with_a_lead_in_and_a_lead_out() {
+    // Today's rest-to-rest ends would put a jerk of ~10^4 rad/s^3 at the first and last ticks.
+    expect(
+        "moving_sine.npz",
+        &[],
+        0,
+        &[
+            "SAFE",
+            "601 waypoints",
+            "phases: lead-in",
+            "playback of the file's 1501 ticks",
+            "lead-out",
+        ],
+    );
+    // At rest but accelerating at both ends: ramps too.
+    expect("crest_to_trough.npz", &[], 0, &["SAFE", "phases: lead-in", "lead-out"]);
+    let o = check("moving_sine.npz", &["--json"]);
+    assert_eq!(o.code, 0, "{}", o.text);
+    let v: serde_json::Value = serde_json::from_str(o.text.trim()).expect("one JSON object");
+    let (lead_in, lead_out) = (v["lead_in_ticks"].as_u64(), v["lead_out_ticks"].as_u64());
+    assert!(lead_in.is_some_and(|n| n > 0) && lead_out.is_some_and(|n| n > 0), "{v}");
+    assert_eq!(v["ticks"].as_u64(), Some(1501 + lead_in.unwrap_or(0) + lead_out.unwrap_or(0)));
+    // Every joint inside its limits over the ramps as well (the report's peaks cover them).
+    for j in v["joints"].as_array().expect("joints") {
+        assert!(j["peak_jerk"].as_f64() < j["jerk_limit"].as_f64(), "{j}");
+    }
+    // A file at rest at both ends has no ramps.
+    let o = check("safe.npz", &[]);
+    assert!(!o.text.contains("lead-in"), "{}", o.text);
+}
+
+#[test]
+fn a_file_without_t_needs_its_waypoint_rate() {
+    expect("moving_sine_no_t.npz", &[], 2, &["'t' is missing", "--waypoint-rate HZ"]);
+    let o = check("moving_sine_no_t.npz", &["--json"]);
+    assert_eq!(o.code, 2);
+    assert!(o.text.contains("--waypoint-rate"), "{}", o.text);
+    expect("moving_sine_no_t.npz", &["--waypoint-rate", "100"], 0, &["SAFE", "601 waypoints"]);
+    // The same file with its times checks the same.
+    let with_t = check("moving_sine.npz", &["--json"]);
+    let without = check("moving_sine_no_t.npz", &["--json", "--waypoint-rate", "100"]);
+    let (a, b): (serde_json::Value, serde_json::Value) = (
+        serde_json::from_str(with_t.text.trim()).expect("json"),
+        serde_json::from_str(without.text.trim()).expect("json"),
+    );
+    assert_eq!(a["joints"], b["joints"]);
+    // A rate for a file with its own t, or a rate that is no rate, is refused.
+    expect("moving_sine.npz", &["--waypoint-rate", "100"], 2, &["has its own key 't'"]);
+    expect("moving_sine_no_t.npz", &["--waypoint-rate", "0"], 2, &["--waypoint-rate 0 Hz"]);
+    expect("moving_sine_no_t.npz", &["--waypoint-rate", "nan"], 2, &["--waypoint-rate NaN Hz"]);
+}
+
+/// The `--speed-scale` value `hitl check` offers as its remedy.
+fn remedy(text: &str) -> f64 {
+    let after = text.split("remedy: --speed-scale ").nth(1).unwrap_or_else(|| panic!("{text}"));
+    after.split_whitespace().next().and_then(|w| w.parse().ok()).expect("a number")
+}
+
+#[test]
+fn a_file_too_fast_for_the_lab_gets_the_speed_scale_that_passes() {
+    let o = check("too_fast.npz", &[]);
+    assert_eq!(o.code, 3, "{}", o.text);
+    assert!(o.text.contains("joint 7 velocity"), "{}", o.text);
+    let s = remedy(&o.text);
+    // Velocity binds: the limit over the file's peak, 1 / (0.4 * 2 pi) = 0.39789 (acceleration
+    // would allow 0.50, jerk 0.85), to 4 digits; the ticks sample just below the peak.
+    let bound = 1.0 / (0.4 * 2.0 * std::f64::consts::PI);
+    assert!((s - bound).abs() < 3e-4, "{s} vs {bound}");
+    let o = check("too_fast.npz", &["--json"]);
+    let j: serde_json::Value = serde_json::from_str(o.text.trim()).expect("json");
+    // The printed value passes; 1 % faster does not.
+    let v = s.to_string();
+    expect("too_fast.npz", &["--speed-scale", &v], 0, &["SAFE"]);
+    let faster = format!("{:.4}", s * 1.01);
+    expect("too_fast.npz", &["--speed-scale", &faster], 3, &["joint 7 velocity"]);
+    // The JSON report carries it; a safe file or one refused for clearance gets none.
+    assert_eq!(j["speed_scale_to_pass"].as_f64(), Some(s));
+    let o = check("safe.npz", &["--json"]);
+    let j: serde_json::Value = serde_json::from_str(o.text.trim()).expect("json");
+    assert!(j["speed_scale_to_pass"].is_null(), "{j}");
+    let o = check("joint4_low.npz", &[]);
+    assert!(!o.text.contains("remedy"), "{}", o.text);
 }

@@ -141,6 +141,7 @@ fn program() -> Program {
         light_lead_ticks: 2,
         settle_tolerance_rad: 1e-3,
         settle_max_ticks: 50,
+        ..Program::default()
     }
 }
 

@@ -68,6 +68,8 @@ fn phase(p: Phase) -> RecPhase {
         // Settling holds the last waypoint: it is the end of playback on the contract's topic.
         Phase::Playback | Phase::Settle => RecPhase::Playback,
         Phase::Stop => RecPhase::Stop,
+        Phase::LeadIn => RecPhase::LeadIn,
+        Phase::LeadOut => RecPhase::LeadOut,
     }
 }
 

@@ -1,8 +1,11 @@
 //! `hitl check`: the preflight on its own. Loads and validates the NPZ, builds the setpoint table
-//! at the playback rate and speed scale, runs every preflight rule at every tick, and prints a
-//! short report (or one JSON object). Exit 0 safe, 3 valid but unsafe, 2 bad file, flags or
-//! config. `hitl run` applies the same rules through [`load_and_check`] before anything moves.
+//! at the playback rate and speed scale (with the lead-in and lead-out of a file that starts or
+//! ends moving), runs every preflight rule at every tick, and prints a short report (or one JSON
+//! object). A file refused only for velocity, acceleration, jerk or step gets the largest
+//! `--speed-scale` that passes, confirmed by a second preflight. Exit 0 safe, 3 valid but unsafe,
+//! 2 bad file, flags or config. `hitl run` applies the same rules before anything moves.
 
+use crate::control::motion::{add_ramps, MotionError};
 use crate::exit;
 use hitl_trajectories::lab::LabConfig;
 use hitl_trajectories::npz::{self, Loaded};
@@ -30,6 +33,10 @@ pub struct CheckArgs {
     /// speed), lowering velocity, acceleration, jerk and step sizes.
     #[arg(long, value_name = "S", default_value_t = 1.0)]
     pub speed_scale: f64,
+    /// Waypoints per second of a file without `t` (a fixed sample rate): waypoint i is at i / HZ
+    /// seconds. Refused for a file that has `t`.
+    #[arg(long, value_name = "HZ")]
+    pub waypoint_rate: Option<f64>,
     /// Print one JSON object (the full report, or an `error`) instead of the human report.
     #[arg(long)]
     pub json: bool,
@@ -41,6 +48,9 @@ pub struct Checked {
     pub loaded: Loaded,
     pub table: SetpointTable,
     pub report: PreflightReport,
+    /// For a file refused only for velocity, acceleration, jerk or step: the largest
+    /// `--speed-scale` that passes (confirmed by a preflight at that value).
+    pub speed_scale_to_pass: Option<f64>,
 }
 
 /// Why a trajectory could not even be checked (exit 2): the message names the problem.
@@ -52,6 +62,8 @@ pub enum CheckError {
     Trajectory { path: String, source: npz::NpzError },
     #[error("{path}: {source}")]
     Timing { path: String, source: hitl_trajectories::timing::TimingError },
+    #[error("{path}: cannot plan the lead-in or lead-out: {source}")]
+    Ramp { path: String, source: MotionError },
 }
 
 /// Load the lab config (or the default lab).
@@ -62,25 +74,80 @@ pub fn load_lab(config: Option<&Path>) -> Result<LabConfig, CheckError> {
     })
 }
 
-/// Load `traj`, build its setpoint table at `rate_hz` and `speed_scale`, run the preflight.
+/// Build the setpoint table of `traj` at `rate_hz` and `speed_scale` with its lead-in and
+/// lead-out, and run the preflight over it.
+fn table_and_report(
+    path: &str,
+    traj: &hitl_trajectories::Trajectory,
+    lab: &LabConfig,
+    rate_hz: f64,
+    speed_scale: f64,
+) -> Result<(SetpointTable, PreflightReport), CheckError> {
+    let table = SetpointTable::build(traj, rate_hz, speed_scale)
+        .map_err(|source| CheckError::Timing { path: path.to_string(), source })?;
+    let table = add_ramps(table, lab)
+        .map_err(|source| CheckError::Ramp { path: path.to_string(), source })?;
+    let report = preflight::check(traj, &table, lab);
+    Ok((table, report))
+}
+
+/// `x` rounded down to 4 significant digits, as the number its decimal text reads.
+fn floor_4_digits(x: f64) -> f64 {
+    let e = x.log10().floor() as i32;
+    let unit = 10f64.powi(e - 3);
+    let v = (x / unit).floor() * unit;
+    let decimals = (3 - e).max(0) as usize;
+    format!("{v:.decimals$}").parse().unwrap_or(v)
+}
+
+/// The printed `--speed-scale` that passes: the scaling laws' value rounded down to 4
+/// significant digits, then checked by a preflight at that value, stepping down by 0.1 % (and
+/// rounding down again) while rounding to ticks fails it. `None` when no value is confirmed.
+fn confirm_speed_scale(
+    path: &str,
+    traj: &hitl_trajectories::Trajectory,
+    lab: &LabConfig,
+    rate_hz: f64,
+    exact: f64,
+) -> Option<f64> {
+    let mut s = floor_4_digits(exact);
+    for _ in 0..20 {
+        if s.is_nan() || s <= 0.0 {
+            return None;
+        }
+        match table_and_report(path, traj, lab, rate_hz, s) {
+            Ok((_, report)) if report.is_safe() => return Some(s),
+            Ok(_) => s = floor_4_digits(s * 0.999),
+            Err(_) => return None,
+        }
+    }
+    None
+}
+
+/// Load `traj` (a file without `t` at `waypoint_rate_hz`), build its setpoint table at `rate_hz`
+/// and `speed_scale` with its ramps, run the preflight, and for a file refused only for
+/// scalable limits find the speed scale that passes.
 pub fn load_and_check(
     traj: &Path,
     lab: &LabConfig,
     rate_hz: f64,
     speed_scale: f64,
+    waypoint_rate_hz: Option<f64>,
 ) -> Result<Checked, CheckError> {
     let path = traj.display().to_string();
-    let loaded =
-        npz::load(traj).map_err(|source| CheckError::Trajectory { path: path.clone(), source })?;
-    let table = SetpointTable::build(&loaded.trajectory, rate_hz, speed_scale)
-        .map_err(|source| CheckError::Timing { path, source })?;
-    let report = preflight::check(&loaded.trajectory, &table, lab);
-    Ok(Checked { loaded, table, report })
+    let options = npz::LoadOptions { waypoint_rate_hz };
+    let loaded = npz::load_with(traj, &options)
+        .map_err(|source| CheckError::Trajectory { path: path.clone(), source })?;
+    let (table, report) = table_and_report(&path, &loaded.trajectory, lab, rate_hz, speed_scale)?;
+    let speed_scale_to_pass = preflight::speed_scale_to_pass(&table, &report, lab)
+        .and_then(|exact| confirm_speed_scale(&path, &loaded.trajectory, lab, rate_hz, exact));
+    Ok(Checked { loaded, table, report, speed_scale_to_pass })
 }
 
 pub fn run(args: CheckArgs) -> u8 {
-    let checked = load_lab(args.config.as_deref())
-        .and_then(|lab| load_and_check(&args.traj, &lab, args.rate, args.speed_scale));
+    let checked = load_lab(args.config.as_deref()).and_then(|lab| {
+        load_and_check(&args.traj, &lab, args.rate, args.speed_scale, args.waypoint_rate)
+    });
     let checked = match checked {
         Ok(c) => c,
         Err(e) => {
@@ -102,6 +169,9 @@ pub fn run(args: CheckArgs) -> u8 {
         if let Some(obj) = v.as_object_mut() {
             obj.insert("file".into(), args.traj.display().to_string().into());
             obj.insert("load_warnings".into(), checked.loaded.warnings.clone().into());
+            obj.insert("lead_in_s".into(), (report.lead_in_ticks as f64 / report.rate_hz).into());
+            obj.insert("lead_out_s".into(), (report.lead_out_ticks as f64 / report.rate_hz).into());
+            obj.insert("speed_scale_to_pass".into(), checked.speed_scale_to_pass.into());
         }
         crate::outln!("{v}");
     } else {
@@ -129,6 +199,23 @@ fn human(path: &Path, c: &Checked) -> String {
         "  {} waypoints, {:.3} s at speed scale {}, {} ticks at {} Hz, {} capture(s)",
         r.waypoints, r.duration_s, r.speed_scale, r.ticks, r.rate_hz, r.captures
     );
+    if r.lead_in_ticks > 0 || r.lead_out_ticks > 0 {
+        let ramp = |ticks: usize, what: &str| {
+            if ticks == 0 {
+                format!("no {what} (at rest)")
+            } else {
+                format!("{what} {:.3} s ({ticks} ticks)", ticks as f64 / r.rate_hz)
+            }
+        };
+        let _ = writeln!(
+            s,
+            "  phases: {} from rest into the first waypoint's motion, playback of the file's \
+             {} ticks, {} from the last waypoint's motion to rest (all included above)",
+            ramp(r.lead_in_ticks, "lead-in"),
+            r.ticks - r.lead_in_ticks - r.lead_out_ticks,
+            ramp(r.lead_out_ticks, "lead-out"),
+        );
+    }
     for w in c.loaded.warnings.iter().chain(&r.warnings) {
         let _ = writeln!(s, "  warning: {w}");
     }
@@ -172,6 +259,14 @@ fn human(path: &Path, c: &Checked) -> String {
     );
     for v in &r.violations {
         let _ = writeln!(s, "  VIOLATION: {}", v.message);
+    }
+    if let Some(scale) = c.speed_scale_to_pass {
+        let _ = writeln!(
+            s,
+            "  remedy: --speed-scale {scale} passes (the largest that does, to 4 digits: \
+             velocity and step scale with it, acceleration with its square, jerk with its cube; \
+             checked by a second preflight)"
+        );
     }
     s
 }

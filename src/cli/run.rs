@@ -30,6 +30,10 @@ pub struct RunArgs {
     /// Slow the trajectory down: time is stretched by 1/S, S in (0, 1].
     #[arg(long, default_value_t = 1.0, value_name = "S")]
     pub speed_scale: f64,
+    /// Waypoints per second of a file without `t` (waypoint i plays at i / HZ s); refused for a
+    /// file that has `t`.
+    #[arg(long, value_name = "HZ")]
+    pub waypoint_rate: Option<f64>,
     /// Record the run to this MCAP file (`hitl record` picks runs/run-<time>.mcap by default).
     #[arg(long, value_name = "FILE.mcap")]
     pub record: Option<PathBuf>,
@@ -170,6 +174,7 @@ pub fn run(args: RunArgs, record: bool) -> u8 {
     };
     let request = RunRequest {
         trajectory: args.trajectory,
+        waypoint_rate_hz: args.waypoint_rate,
         lab,
         rate_hz: args.rate,
         speed_scale: args.speed_scale,

@@ -1,5 +1,6 @@
 //! Jerk-limited moves planned with Ruckig (the official C++ library through the `ruckig` crate):
-//! the approach from the arm's pose to the first waypoint, and stops from any moving state.
+//! the approach from the arm's pose to the first waypoint, stops from any moving state, and the
+//! lead-in and lead-out of a trajectory that starts or ends moving ([`add_ramps`]).
 //!
 //! Both are planned whole ("offline" in Ruckig's words) and sampled at the control period into
 //! setpoints, so the tick only reads a table. Planning allocates: it runs before the loop
@@ -7,6 +8,8 @@
 
 use super::setpoint::Setpoint;
 use hitl_hal::Joints;
+use hitl_trajectories::lab::LabConfig;
+use hitl_trajectories::timing::{JointState, SetpointTable};
 use ruckig::{ControlInterface, InputParameter, Result as RuckigResult, Ruckig, Trajectory};
 
 /// Per-joint kinematic limits for a planned move.
@@ -130,9 +133,170 @@ pub fn plan_stop(
     Ok(n)
 }
 
+/// Fraction of the lab's playback limits (velocity, acceleration, jerk) a lead-in or lead-out
+/// plans with, so that sampling at the tick never brings a ramp to a limit.
+pub const RAMP_LIMIT_FRACTION: f64 = 0.8;
+
+/// The limits a ramp into or out of `state` plans with at tick period `dt`:
+/// [`RAMP_LIMIT_FRACTION`] of the lab's playback limits (the velocity also of the per-tick step
+/// limit), raised to the state's own velocity and acceleration where those are higher (Ruckig
+/// needs the state inside its limits; a state beyond the lab's limits is the file's own
+/// violation, which the preflight names at the file's tick).
+fn ramp_limits(state: &JointState, lab: &LabConfig, dt: f64) -> MoveLimits {
+    let l = &lab.limits;
+    MoveLimits {
+        velocity: std::array::from_fn(|j| {
+            (RAMP_LIMIT_FRACTION * l.velocity_rad_s[j].min(l.max_step_rad / dt))
+                .max(state.qd[j].abs() * (1.0 + 1e-9))
+        }),
+        acceleration: std::array::from_fn(|j| {
+            (RAMP_LIMIT_FRACTION * l.acceleration_rad_s2[j]).max(state.qdd[j].abs() * (1.0 + 1e-6))
+        }),
+        jerk: l.jerk_rad_s3.map(|x| RAMP_LIMIT_FRACTION * x),
+    }
+}
+
+/// The time-optimal jerk-limited way from the moving `state` to rest (velocity interface: the
+/// position is free), as a Ruckig trajectory.
+fn to_rest(state: &JointState, limits: &MoveLimits) -> Result<Trajectory, MotionError> {
+    let values = state.q.iter().chain(state.qd.iter()).chain(state.qdd.iter());
+    if values.into_iter().any(|v| !v.is_finite()) {
+        return Err(MotionError::NotFinite);
+    }
+    let mut input = InputParameter::new(7);
+    input.control_interface = ControlInterface::Velocity;
+    input.current_position = state.q.to_vec();
+    input.current_velocity = state.qd.to_vec();
+    input.current_acceleration = state.qdd.to_vec();
+    input.target_velocity = vec![0.0; 7];
+    input.target_acceleration = vec![0.0; 7];
+    set_limits(&mut input, limits);
+    calculate(&mut input)
+}
+
+/// Most ticks a ramp may take (a minute at 1 kHz); a longer one is refused.
+const MAX_RAMP_TICKS: usize = 60_000;
+
+/// Samples of `trajectory` at `times` (each clamped to its duration).
+fn sample_at(trajectory: &Trajectory, times: impl Iterator<Item = f64>) -> Vec<JointState> {
+    let duration = trajectory.get_duration();
+    times
+        .map(|t| {
+            let (p, v, a) = trajectory.at_time(t.clamp(0.0, duration));
+            let mut s = JointState::default();
+            s.q.copy_from_slice(&p);
+            s.qd.copy_from_slice(&v);
+            s.qdd.copy_from_slice(&a);
+            s
+        })
+        .collect()
+}
+
+/// A lead-in: from rest to exactly `to` (position, velocity, acceleration), sampled every `dt`,
+/// its first sample at rest and its last one tick before `to`. Empty when `to` is at rest.
+///
+/// Planned backwards: the time-reversed motion (velocity negated, acceleration kept) is a
+/// jerk-limited stop from `to`, and a stop never turns back, so the lead-in runs straight into
+/// the file's motion from the nearest rest that can reach it within `limits`.
+pub fn plan_lead_in(
+    to: &JointState,
+    limits: &MoveLimits,
+    dt: f64,
+) -> Result<Vec<JointState>, MotionError> {
+    if to.at_rest() {
+        return Ok(Vec::new());
+    }
+    let reversed = JointState { q: to.q, qd: to.qd.map(|v| -v), qdd: to.qdd };
+    let stop = to_rest(&reversed, limits)?;
+    let duration = stop.get_duration();
+    let steps = (duration / dt).ceil().max(1.0) as usize;
+    if steps > MAX_RAMP_TICKS {
+        return Err(MotionError::TooLong(MAX_RAMP_TICKS));
+    }
+    let mut out = sample_at(&stop, (1..=steps).rev().map(|m| m as f64 * dt));
+    for s in &mut out {
+        s.qd = s.qd.map(|v| -v);
+    }
+    // Start exactly at rest.
+    out[0].qd = [0.0; 7];
+    out[0].qdd = [0.0; 7];
+    Ok(out)
+}
+
+/// A lead-out: from `from` (position, velocity, acceleration) to rest, sampled every `dt` after
+/// it, its last sample exactly at rest. Empty when `from` is at rest.
+pub fn plan_lead_out(
+    from: &JointState,
+    limits: &MoveLimits,
+    dt: f64,
+) -> Result<Vec<JointState>, MotionError> {
+    if from.at_rest() {
+        return Ok(Vec::new());
+    }
+    let stop = to_rest(from, limits)?;
+    let steps = (stop.get_duration() / dt).ceil().max(1.0) as usize;
+    if steps > MAX_RAMP_TICKS {
+        return Err(MotionError::TooLong(MAX_RAMP_TICKS));
+    }
+    let mut out = sample_at(&stop, (1..=steps).map(|m| m as f64 * dt));
+    let last = out.len() - 1;
+    out[last].qd = [0.0; 7];
+    out[last].qdd = [0.0; 7];
+    Ok(out)
+}
+
+/// Give `table` its lead-in and lead-out where the file starts or ends moving, planned within
+/// [`RAMP_LIMIT_FRACTION`] of the lab's playback limits; a table at rest at both ends comes back
+/// unchanged. The result goes through the preflight like any table.
+pub fn add_ramps(table: SetpointTable, lab: &LabConfig) -> Result<SetpointTable, MotionError> {
+    let (start, end) = (table.file_start(), table.file_end());
+    let dt = table.dt;
+    let lead_in = plan_lead_in(&start, &ramp_limits(&start, lab, dt), dt)?;
+    let lead_out = plan_lead_out(&end, &ramp_limits(&end, lab, dt), dt)?;
+    Ok(table.with_ramps(&lead_in, &lead_out))
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn a_lead_in_arrives_on_the_moving_state_and_a_lead_out_leaves_it_to_rest() {
+        let state = JointState {
+            q: [0.1, -0.4, 0.0, 1.4, 0.0, 1.5, 0.0],
+            qd: [0.126, 0.0, -0.3, 0.0, 0.0, 0.05, 0.0],
+            qdd: [0.0, 0.5, 0.2, 0.0, 0.0, 0.0, -0.1],
+        };
+        let limits = MoveLimits::uniform(0.8, 3.2, 48.0);
+        let dt = 0.004;
+        let lead_in = plan_lead_in(&state, &limits, dt).expect("lead-in");
+        let lead_out = plan_lead_out(&state, &limits, dt).expect("lead-out");
+        assert!(!lead_in.is_empty() && !lead_out.is_empty());
+        assert!(lead_in[0].at_rest() && lead_out[lead_out.len() - 1].at_rest());
+        // One tick of constant jerk at most separates each ramp from the state it meets.
+        let within = |s: &JointState, t: f64| {
+            (0..7).all(|j| {
+                let p = s.q[j] + s.qd[j] * t + 0.5 * s.qdd[j] * t * t;
+                (p - state.q[j]).abs() <= 48.0 * dt.powi(3) / 6.0 * 1.01 + 1e-12
+                    && (s.qd[j] + s.qdd[j] * t - state.qd[j]).abs()
+                        <= 0.5 * 48.0 * dt * dt * 1.01 + 1e-12
+                    && (s.qdd[j] - state.qdd[j]).abs() <= 48.0 * dt * 1.0001 + 1e-12
+            })
+        };
+        assert!(within(&lead_in[lead_in.len() - 1], dt), "{:?}", lead_in[lead_in.len() - 1]);
+        assert!(within(&lead_out[0], -dt), "{:?}", lead_out[0]);
+        // Within the limits on every sample, and continuous in acceleration.
+        for ramp in [&lead_in, &lead_out] {
+            for w in ramp.windows(2) {
+                for j in 0..7 {
+                    assert!(w[1].qd[j].abs() <= 0.8 + 1e-9);
+                    assert!(w[1].qdd[j].abs() <= 3.2 + 1e-9);
+                    assert!((w[1].qdd[j] - w[0].qdd[j]).abs() <= 48.0 * dt * 1.0001 + 1e-12);
+                }
+            }
+        }
+        assert!(plan_lead_in(&JointState::default(), &limits, dt).expect("rest").is_empty());
+    }
 
     #[test]
     fn a_move_ends_on_its_goal_within_limits() {

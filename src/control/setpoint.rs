@@ -39,6 +39,11 @@ pub enum Phase {
     Settle,
     /// A jerk-limited stop after a trip or an operator stop.
     Stop,
+    /// From rest into the first waypoint's motion, for a trajectory that starts moving.
+    LeadIn,
+    /// From the last waypoint's motion to rest, for a trajectory that ends moving (and the hold
+    /// at its end while the arm settles).
+    LeadOut,
 }
 
 impl Phase {
@@ -48,6 +53,8 @@ impl Phase {
             Phase::Playback => "playback",
             Phase::Settle => "settle",
             Phase::Stop => "stop",
+            Phase::LeadIn => "lead-in",
+            Phase::LeadOut => "lead-out",
         }
     }
 }

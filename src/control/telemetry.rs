@@ -91,6 +91,8 @@ impl LoopStatus {
             0 => Phase::Approach,
             1 => Phase::Playback,
             2 => Phase::Settle,
+            4 => Phase::LeadIn,
+            5 => Phase::LeadOut,
             _ => Phase::Stop,
         }
     }

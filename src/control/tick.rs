@@ -42,6 +42,11 @@ pub struct Program {
     pub settle_tolerance_rad: f64,
     /// ...or this many ticks have passed.
     pub settle_max_ticks: u64,
+    /// The first this many playback setpoints are the lead-in (from rest into a file that starts
+    /// moving) and the last `lead_out_ticks` the lead-out (to rest); recorded as phases of their
+    /// own. Settling after a lead-out holds its end and is recorded as lead-out.
+    pub lead_in_ticks: u64,
+    pub lead_out_ticks: u64,
 }
 
 impl Program {
@@ -321,7 +326,15 @@ where
             return Ok((Phase::Approach, p.approach[k as usize]));
         }
         if k < p.playback_end() {
-            return Ok((Phase::Playback, p.playback[(k - p.approach_ticks()) as usize]));
+            let i = k - p.approach_ticks();
+            let phase = if i < p.lead_in_ticks {
+                Phase::LeadIn
+            } else if i + p.lead_out_ticks >= p.playback.len() as u64 {
+                Phase::LeadOut
+            } else {
+                Phase::Playback
+            };
+            return Ok((phase, p.playback[i as usize]));
         }
         let goal = p.playback.last().or(p.approach.last()).copied().unwrap_or(self.last_sent);
         let settled = arm.is_some_and(|a| {
@@ -331,7 +344,8 @@ where
         if settled || settle_ticks >= p.settle_max_ticks {
             return Err(Outcome::Completed { ticks: k, settled });
         }
-        Ok((Phase::Settle, Setpoint::rest(goal.q)))
+        let phase = if p.lead_out_ticks > 0 { Phase::LeadOut } else { Phase::Settle };
+        Ok((phase, Setpoint::rest(goal.q)))
     }
 
     /// The stop's setpoint for tick `k`: from the plan, a bridge until it arrives, or the end.

@@ -91,6 +91,8 @@ pub enum ArmTarget {
 #[derive(Debug, Clone)]
 pub struct RunRequest {
     pub trajectory: PathBuf,
+    /// Waypoints per second of a file without `t` (`--waypoint-rate`).
+    pub waypoint_rate_hz: Option<f64>,
     pub lab: LabConfig,
     pub rate_hz: f64,
     pub speed_scale: f64,
@@ -586,6 +588,8 @@ fn build_program(
         light_lead_ticks: 0,
         settle_tolerance_rad: 0.002,
         settle_max_ticks: (2.0 * table.rate_hz) as u64,
+        lead_in_ticks: table.lead_in_ticks as u64,
+        lead_out_ticks: table.lead_out_ticks as u64,
         approach,
     })
 }

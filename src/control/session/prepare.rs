@@ -2,7 +2,7 @@
 //! approach from wherever the arm stands planned and preflighted by the same rules.
 
 use super::{ArmTarget, RunError, RunRequest};
-use crate::control::motion::{plan_move, MoveLimits};
+use crate::control::motion::{add_ramps, plan_move, MoveLimits};
 use crate::control::setpoint::Setpoint;
 use hitl_hal::Joints;
 use hitl_trajectories::lab::LabConfig;
@@ -36,16 +36,21 @@ pub(super) fn check_rate(req: &RunRequest) -> Result<(), RunError> {
     Ok(())
 }
 
-/// Load, time-parametrise and preflight the trajectory: refuse before anything is opened.
+/// Load, time-parametrise (with the lead-in and lead-out of a file that starts or ends moving)
+/// and preflight the trajectory: refuse before anything is opened.
 pub(super) fn prepare(req: &RunRequest) -> Result<(Trajectory, SetpointTable), RunError> {
     check_rate(req)?;
-    let loaded = npz::load(&req.trajectory).map_err(|e| RunError::BadInput(e.to_string()))?;
+    let options = npz::LoadOptions { waypoint_rate_hz: req.waypoint_rate_hz };
+    let loaded = npz::load_with(&req.trajectory, &options)
+        .map_err(|e| RunError::BadInput(format!("{}: {e}", req.trajectory.display())))?;
     for warning in &loaded.warnings {
         crate::errln!("warning: {warning}");
     }
     let traj = loaded.trajectory;
     let table = SetpointTable::build(&traj, req.rate_hz, req.speed_scale)
         .map_err(|e| RunError::BadInput(e.to_string()))?;
+    let table = add_ramps(table, &req.lab)
+        .map_err(|e| RunError::Refused(format!("  - lead-in/lead-out: {e}")))?;
     let report = preflight::check(&traj, &table, &req.lab);
     if !report.is_safe() {
         return Err(RunError::Refused(violations(&report)));
@@ -91,6 +96,8 @@ pub(super) fn approach_table(
         waypoint_ticks: vec![0, ticks - 1],
         captures: Vec::new(),
         light: None,
+        lead_in_ticks: 0,
+        lead_out_ticks: 0,
     };
     (traj, table)
 }
