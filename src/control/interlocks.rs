@@ -117,6 +117,13 @@ impl TripKind {
                 "the arm stopped answering setpoints for longer than interlocks.reply_stall_ms"
                     .into()
             }
+            // Code 0: the reply to a setpoint flagged an error (or "not ready") before any report
+            // carried the code (the 5 Hz report that does may come 200 ms later).
+            TripKind::ArmError { code: 0 } => {
+                "the arm refused a setpoint: its reply flagged an error or not-ready state before \
+                 a report carried the error code"
+                    .into()
+            }
             TripKind::ArmError { code } => format!("the arm reports error code {code}"),
             TripKind::ArmWarning { code } => format!("the arm reports warning code {code}"),
             TripKind::Deviation { joint, deviation_rad } => format!(
@@ -307,6 +314,9 @@ mod tests {
         let t = il().check(&sense(Some(&err), &cmd)).expect("error");
         assert_eq!(t, TripKind::ArmError { code: 23 });
         assert_eq!((t.reaction(), t.exit_code()), (Reaction::Hold, 4));
+        assert_eq!(t.detail(), "the arm reports error code 23");
+        let refused = TripKind::ArmError { code: 0 }.detail();
+        assert!(refused.contains("refused a setpoint") && !refused.contains("code 0"), "{refused}");
 
         let mut off = fresh;
         off.q[4] = 0.1;
