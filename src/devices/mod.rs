@@ -163,3 +163,110 @@ impl RunDevices {
         out
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use super::any::{Kinds, Unmanaged};
+    use super::*;
+    use hitl_hal::{CaptureRequest, ErrorKind, ErrorType, Intrinsics, RgbdFrame};
+    use std::sync::{Arc, Mutex};
+
+    type Calls = Arc<Mutex<Vec<&'static str>>>;
+
+    /// A camera that, like the Orbbec driver, refuses to arm its trigger before it is configured.
+    struct Scripted {
+        calls: Calls,
+        configured: bool,
+        configure_fails: bool,
+    }
+
+    impl Scripted {
+        fn log(&self, call: &'static str) {
+            self.calls.lock().unwrap_or_else(|e| e.into_inner()).push(call);
+        }
+    }
+
+    impl ErrorType for Scripted {
+        type Error = ErrorKind;
+    }
+
+    impl RgbdCamera for Scripted {
+        fn configure(&mut self, config: &StreamConfig) -> Result<Intrinsics, ErrorKind> {
+            self.log("configure");
+            if self.configure_fails {
+                return Err(ErrorKind::NotFound);
+            }
+            self.configured = true;
+            Ok(config.intrinsics)
+        }
+        fn arm_trigger(&mut self) -> Result<(), ErrorKind> {
+            self.log("arm_trigger");
+            if self.configured {
+                Ok(())
+            } else {
+                Err(ErrorKind::InvalidRequest)
+            }
+        }
+        fn trigger(&mut self, _request: CaptureRequest) -> Result<(), ErrorKind> {
+            Ok(())
+        }
+        fn poll_frame(&mut self) -> Result<Option<RgbdFrame>, ErrorKind> {
+            Ok(None)
+        }
+    }
+
+    fn start_with(configure_fails: bool) -> (Result<(), DeviceError>, Vec<&'static str>) {
+        let calls = Calls::default();
+        let cam = Scripted { calls: Arc::clone(&calls), configured: false, configure_fails };
+        let runtime =
+            tokio::runtime::Builder::new_current_thread().enable_all().build().expect("runtime");
+        let ctx = OpenContext {
+            runtime: runtime.handle(),
+            clock: MonotonicClock::new(),
+            #[cfg(feature = "stub")]
+            sim: None,
+        };
+        let opened = light::open_light(&LightSpec::None, &ctx).expect("no light opens");
+        let mut devices = RunDevices {
+            camera: RunCamera {
+                dev: Box::new(Kinds::new(Unmanaged(cam))),
+                name: "scripted camera".into(),
+                delivers_frames: true,
+            },
+            light: opened.light,
+            inputs: opened.inputs,
+            trigger: opened.trigger,
+        };
+        let stream = StreamConfig {
+            intrinsics: Intrinsics {
+                width: 64,
+                height: 48,
+                fx: 40.0,
+                fy: 40.0,
+                cx: 32.0,
+                cy: 24.0,
+            },
+            mask: false,
+        };
+        let started = devices.start(&stream);
+        let calls = calls.lock().unwrap_or_else(|e| e.into_inner()).clone();
+        (started, calls)
+    }
+
+    /// The Orbbec path could never start because nothing configured the camera before arming
+    /// it: every camera is configured, then armed, before the arm is enabled.
+    #[test]
+    fn a_camera_is_configured_before_its_trigger_is_armed() {
+        let (started, calls) = start_with(false);
+        assert_eq!(started, Ok(()));
+        assert_eq!(calls, ["configure", "arm_trigger"]);
+    }
+
+    #[test]
+    fn a_camera_that_cannot_be_configured_is_named_and_never_armed() {
+        let (started, calls) = start_with(true);
+        let Err(DeviceError::Failed(why)) = started else { panic!("{started:?}") };
+        assert!(why.contains("scripted camera: configure failed"), "{why}");
+        assert_eq!(calls, ["configure"]);
+    }
+}
