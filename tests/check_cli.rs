@@ -84,6 +84,10 @@ save("crest_to_trough.npz", qpos=qc, t=tc)
 tf = np.linspace(0.0, 1.0, 101)
 qf = np.tile(LOOK, (len(tf), 1)); qf[:, 6] += 0.8 * np.sin(np.pi * tf) ** 2
 save("too_fast.npz", qpos=qf, t=tf)
+# Ends at 0.9 rad/s and still accelerating at 3.5 rad/s^2 (joint 7): inside every limit, but no
+# jerk-limited stop from there stays under 1 rad/s, so the lead-out breaks the velocity limit.
+qh = np.tile(LOOK, (len(tf), 1)); qh[:, 6] += -0.26667 * tf ** 3 + 0.425 * tf ** 4
+save("hot_end.npz", qpos=qh, t=tf)
 "#;
 
 fn python() -> PathBuf {
@@ -370,4 +374,19 @@ fn a_file_too_fast_for_the_lab_gets_the_speed_scale_that_passes() {
     assert!(j["speed_scale_to_pass"].is_null(), "{j}");
     let o = check("joint4_low.npz", &[]);
     assert!(!o.text.contains("remedy"), "{}", o.text);
+}
+
+#[test]
+fn a_lead_out_over_the_limit_is_refused_and_slowing_down_cures_it() {
+    let o = check("hot_end.npz", &[]);
+    assert_eq!(o.code, 3, "{}", o.text);
+    assert!(o.text.contains("no lead-in (the file starts at rest)"), "{}", o.text);
+    assert!(
+        o.text.contains("joint 7 velocity") && o.text.contains("in the lead-out"),
+        "{}",
+        o.text
+    );
+    let s = remedy(&o.text);
+    assert!(s > 0.9 && s < 1.0, "{s}");
+    expect("hot_end.npz", &["--speed-scale", &s.to_string()], 0, &["SAFE"]);
 }

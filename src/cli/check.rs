@@ -102,7 +102,9 @@ fn floor_4_digits(x: f64) -> f64 {
 
 /// The printed `--speed-scale` that passes: the scaling laws' value rounded down to 4
 /// significant digits, then checked by a preflight at that value, stepping down by 0.1 % (and
-/// rounding down again) while rounding to ticks fails it. `None` when no value is confirmed.
+/// rounding down again) while rounding to ticks fails it. When that does not reach a passing
+/// value within 2 % (a ramp, which does not follow the laws, breaks a limit), the search goes on
+/// in 1 % steps. `None` when no value is confirmed.
 fn confirm_speed_scale(
     path: &str,
     traj: &hitl_trajectories::Trajectory,
@@ -111,13 +113,13 @@ fn confirm_speed_scale(
     exact: f64,
 ) -> Option<f64> {
     let mut s = floor_4_digits(exact);
-    for _ in 0..20 {
+    for attempt in 0..120 {
         if s.is_nan() || s <= 0.0 {
             return None;
         }
         match table_and_report(path, traj, lab, rate_hz, s) {
             Ok((_, report)) if report.is_safe() => return Some(s),
-            Ok(_) => s = floor_4_digits(s * 0.999),
+            Ok(_) => s = floor_4_digits(s * if attempt < 20 { 0.999 } else { 0.99 }),
             Err(_) => return None,
         }
     }
@@ -200,20 +202,29 @@ fn human(path: &Path, c: &Checked) -> String {
         r.waypoints, r.duration_s, r.speed_scale, r.ticks, r.rate_hz, r.captures
     );
     if r.lead_in_ticks > 0 || r.lead_out_ticks > 0 {
-        let ramp = |ticks: usize, what: &str| {
+        let ramp = |ticks: usize, what: &str, how: &str, rest: &str| {
             if ticks == 0 {
-                format!("no {what} (at rest)")
+                format!("no {what} ({rest})")
             } else {
-                format!("{what} {:.3} s ({ticks} ticks)", ticks as f64 / r.rate_hz)
+                format!("{what} {:.3} s ({ticks} ticks) {how}", ticks as f64 / r.rate_hz)
             }
         };
         let _ = writeln!(
             s,
-            "  phases: {} from rest into the first waypoint's motion, playback of the file's \
-             {} ticks, {} from the last waypoint's motion to rest (all included above)",
-            ramp(r.lead_in_ticks, "lead-in"),
+            "  phases: {}, playback of the file's {} ticks, {} (all included above)",
+            ramp(
+                r.lead_in_ticks,
+                "lead-in",
+                "from rest into the first waypoint's motion",
+                "the file starts at rest"
+            ),
             r.ticks - r.lead_in_ticks - r.lead_out_ticks,
-            ramp(r.lead_out_ticks, "lead-out"),
+            ramp(
+                r.lead_out_ticks,
+                "lead-out",
+                "from the last waypoint's motion to rest",
+                "the file ends at rest"
+            ),
         );
     }
     for w in c.loaded.warnings.iter().chain(&r.warnings) {
@@ -263,9 +274,9 @@ fn human(path: &Path, c: &Checked) -> String {
     if let Some(scale) = c.speed_scale_to_pass {
         let _ = writeln!(
             s,
-            "  remedy: --speed-scale {scale} passes (the largest that does, to 4 digits: \
-             velocity and step scale with it, acceleration with its square, jerk with its cube; \
-             checked by a second preflight)"
+            "  remedy: --speed-scale {scale} passes (from the scaling laws: velocity and step \
+             scale with it, acceleration with its square, jerk with its cube; rounded down to 4 \
+             digits and confirmed by a preflight at that value)"
         );
     }
     s

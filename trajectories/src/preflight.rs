@@ -469,7 +469,9 @@ const SCALABLE: [Rule; 4] = [Rule::Velocity, Rule::Acceleration, Rule::Jerk, Rul
 /// limits at any scale): `s = time_scale * min_j min(v_max/v, sqrt(a_max/a), cbrt(j_max/j),
 /// step_max/step)`, `time_scale` being the one the table was built at. The value is exact for the
 /// continuous motion; ticks fall at other trajectory times once stretched, so the caller confirms
-/// it with a second preflight and steps down slightly when rounding fails it.
+/// it with a second preflight and steps down slightly when rounding fails it. Ramps do not follow
+/// the laws (they are planned within fixed limits from the scaled end state), so a violation in
+/// a ramp alone gives the current scale as the start of the caller's search.
 pub fn speed_scale_to_pass(
     table: &SetpointTable,
     report: &PreflightReport,
@@ -500,8 +502,11 @@ pub fn speed_scale_to_pass(
             factor = factor.min(r);
         }
     }
-    let s = table.time_scale * factor;
-    (s.is_finite() && s > 0.0 && s < table.speed_scale).then_some(s)
+    // When only a ramp breaks a limit (an end still accelerating near the velocity limit: no
+    // jerk-limited stop can avoid adding speed), the file's own bound is no bound: the caller's
+    // search starts below the current scale.
+    let s = (table.time_scale * factor).min(table.speed_scale);
+    (s.is_finite() && s > 0.0).then_some(s)
 }
 
 #[cfg(test)]
