@@ -6,11 +6,14 @@
 //! every waypoint at its time. At each waypoint the curve takes a velocity and an acceleration
 //! shared by the segments on both sides, so position, velocity and acceleration are continuous
 //! (C2) and jerk is bounded (a polynomial on each segment, stepping only at waypoints). The knot
-//! velocities and accelerations are those of the clamped cubic spline through the waypoints
-//! (zero velocity at both ends): on interior segments the quintic *is* that cubic spline, the
-//! smoothest C2 interpolant (least integral of squared acceleration). The first and last
-//! segments also take zero acceleration at the ends, rest to rest; on them the quintic is the
-//! minimum-jerk curve meeting those end conditions. Setpoints are evaluated analytically (no
+//! velocities and accelerations are those of the clamped cubic spline through the waypoints,
+//! clamped at each end to the file's own velocity: zero for a file at rest there (on interior
+//! segments the quintic then *is* that cubic spline, the smoothest C2 interpolant). The end
+//! knots take the file's own acceleration (zero at rest); on the first and last segments the
+//! quintic is the minimum-jerk curve meeting those end conditions. A file that starts or ends
+//! moving (its end state estimated from its end waypoints, see [`boundary`]) thus plays its own
+//! motion to its ends; the controller adds a lead-in from rest and a lead-out to rest
+//! ([`SetpointTable::with_ramps`]), and files at rest at both ends play exactly as before. Setpoints are evaluated analytically (no
 //! numerical integration, no accumulated error). Like every spline, it can swing a little past a
 //! waypoint next to a sharp corner in the data (a few percent of the step, decaying over a few
 //! segments); preflight checks every tick, so such a swing can never reach a limit unnoticed.
@@ -19,8 +22,8 @@
 //! full speed, ignoring speed arguments: the host must stream small, smooth steps at a steady
 //! rate. Here each step is `qd * dt` to first order, so bounding `|qd|` bounds the step;
 //! continuous acceleration means no velocity jumps between ticks (the shaking users report with
-//! jerky host streams); rest-to-rest ends mean the stream starts and ends where the arm is at
-//! rest. [`crate::preflight`] checks every tick of this table (step, velocity, acceleration,
+//! jerky host streams); rest-to-rest ends (or ramps to rest) mean the stream starts and ends
+//! where the arm is at rest. [`crate::preflight`] checks every tick of this table (step, velocity, acceleration,
 //! jerk, limits, clearances) before anything moves.
 //!
 //! **Time.** A speed scale `s` in (0, 1] stretches time (`t' = t / s`), so velocities scale by
