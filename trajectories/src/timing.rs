@@ -11,7 +11,7 @@
 //! segments the quintic then *is* that cubic spline, the smoothest C2 interpolant). The end
 //! knots take the file's own acceleration (zero at rest); on the first and last segments the
 //! quintic is the minimum-jerk curve meeting those end conditions. A file that starts or ends
-//! moving (its end state estimated from its end waypoints, see [`boundary`]) thus plays its own
+//! moving (its end state estimated from its end waypoints, see `boundary`) thus plays its own
 //! motion to its ends; the controller adds a lead-in from rest and a lead-out to rest
 //! ([`SetpointTable::with_ramps`]), and files at rest at both ends play exactly as before. Setpoints are evaluated analytically (no
 //! numerical integration, no accumulated error). Like every spline, it can swing a little past a
