@@ -379,7 +379,7 @@ where
 
     /// Tell the arm to stop where it is (if it still hears us) and end the run.
     fn hold(&mut self, trip: Trip) -> Outcome {
-        // Send only: the arm's stop is a write that waits for no reply (XarmClient::stop), so the
+        // Send only: the arm's stop is a write that waits for no reply (the xArm driver's `stop`), so the
         // tick never blocks on a box that does not answer. Whether the box really stopped is the
         // stop supervisor's job, after the loop and off this thread (control::stop_supervisor).
         let _ = self.devices.arm.stop();

@@ -8,7 +8,8 @@
 //!   that come with a light device;
 //! - [`inputs`]: every safety-input source of the run, read together;
 //! - [`any`]: the trait objects and adapters that give the loop one type per role;
-//! - [`none`]: the deliberately absent devices.
+//! - [`none`]: the deliberately absent devices;
+//! - [`stub`]: the embedded MuJoCo stub (SITL) a run without `--arm` plays on.
 
 pub mod any;
 pub mod arm;
@@ -16,6 +17,8 @@ pub mod camera;
 pub mod inputs;
 pub mod light;
 pub mod none;
+#[cfg(feature = "stub")]
+pub mod stub;
 
 pub use any::{RunCamera, RunLight, RunTrigger};
 pub use camera::{CameraSpec, CameraSpecError};

@@ -1,14 +1,12 @@
 //! The link to the arm: the command client's address, who the arm is (serial number, firmware,
 //! and so its joint-limit table), the report reader (on the real-time scheduler just below the
-//! loop), the first report, and the embedded MuJoCo stub when the run targets it.
+//! loop), the first report, and the box's stop confirmed after a trip.
 
-#[cfg(feature = "stub")]
-use super::devices::TargetScene;
 use super::prepare::violations;
 use super::RunError;
 use crate::control::stop_supervisor::{supervise_stop, StopConfirmation, StopPolicy};
 use crate::control::tick::Outcome;
-use crate::devices::arm::{ReportConfig, RunArm as XarmClient, RunArmReports as ReportReader};
+use crate::devices::arm::{ReportConfig, RunArm, RunArmReports};
 use crate::rt::{self, slot::LatestSlot, slot::SlotReader};
 use hitl_hal::{ArmReports, ArmState, Clock, MonotonicClock};
 use hitl_record::{EventKind, SafetyEventMsg, Telemetry};
@@ -40,7 +38,7 @@ pub struct ArmIdentity {
 }
 
 /// Ask the arm who it is: serial number and firmware version (a failure is a device fault).
-pub(super) fn read_identity(arm: &mut XarmClient) -> Result<ArmIdentity, RunError> {
+pub(super) fn read_identity(arm: &mut RunArm) -> Result<ArmIdentity, RunError> {
     let serial = arm
         .serial_number()
         .map_err(|e| RunError::Device(format!("reading the arm's serial number: {e}")))?;
@@ -72,7 +70,7 @@ pub(super) fn lab_for_arm(lab: &LabConfig, identity: &ArmIdentity) -> LabConfig 
 /// trajectory again against the tighter of the lab's and the arm's joint tables (exit 3 naming
 /// the joint and the table). Returns the lab the approach must be planned and checked in.
 pub(super) fn identify_and_check(
-    arm: &mut XarmClient,
+    arm: &mut RunArm,
     lab: &LabConfig,
     traj: &Trajectory,
     table: &SetpointTable,
@@ -105,7 +103,7 @@ pub(super) fn identify_and_check(
 /// NOT confirmed: ...`). A completed run has nothing to stop (`None`). `reports` is the session's
 /// tap of the report slot; the reader thread must still be running.
 pub(super) fn confirm_stop(
-    arm: &mut XarmClient,
+    arm: &mut RunArm,
     reports: &mut SlotReader<ArmState>,
     outcome: &Outcome,
     clock: MonotonicClock,
@@ -132,7 +130,7 @@ pub(super) fn confirm_stop(
 /// normal scheduler cannot make the watchdog see a silence the arm did not cause. Refused, it
 /// stays on the normal scheduler (the loop's own report already says real-time was refused).
 pub(super) fn spawn_report_reader(
-    mut reader: ReportReader,
+    mut reader: RunArmReports,
     slot: LatestSlot<ArmState>,
     stop: Arc<AtomicBool>,
     fifo_priority: Option<i32>,
@@ -165,51 +163,14 @@ pub(super) fn first_report(
     None
 }
 
-/// The embedded stub, when the run targets it: the arm server, and the pieces of the scene the
-/// simulated camera and light share with it.
-#[cfg(feature = "stub")]
-pub(super) struct EmbeddedStub {
-    pub(super) handle: hitl_sim_stub::StubHandle,
-    pub(super) lab_model: hitl_sim_stub::mujoco_plant::LabModel,
-    pub(super) arm: hitl_sim_stub::mujoco_plant::SharedArmState,
-    pub(super) light: hitl_sim_stub::camera::LightLevel,
-}
-
-#[cfg(feature = "stub")]
-pub(super) fn start_stub(
-    faults: &[String],
-    lab: &LabConfig,
-    target: &TargetScene,
-) -> Result<EmbeddedStub, RunError> {
-    use hitl_sim_stub::mjcf::TargetModel as StubTarget;
-    use hitl_sim_stub::mujoco_plant::{LabModel, MujocoPlant};
-    use hitl_sim_stub::{Fault, Stub, StubConfig};
-    let faults = faults
-        .iter()
-        .map(|s| s.parse::<Fault>().map_err(|e| RunError::BadInput(e.to_string())))
-        .collect::<Result<Vec<_>, _>>()?;
-    let stub_target = StubTarget {
-        mesh: Some(target.model.vertices_faces()),
-        greatest_dimension_m: target.model.greatest_dimension_m() * target.scale,
-    };
-    let lab_model = LabModel::generated(lab, &stub_target)
-        .map_err(|e| RunError::Device(format!("stub scene: {e}")))?;
-    let plant = MujocoPlant::from_lab_model(lab_model.clone());
-    let arm = plant.shared_state();
-    let config = StubConfig { faults, ..StubConfig::ephemeral() };
-    let handle =
-        Stub::start(config, Box::new(plant)).map_err(|e| RunError::Device(format!("stub: {e}")))?;
-    Ok(EmbeddedStub { handle, lab_model, arm, light: Default::default() })
-}
-
 pub(super) fn connect_reports(
     host: IpAddr,
     port: u16,
     codes_port: Option<u16>,
     clock: MonotonicClock,
-) -> Result<ReportReader, RunError> {
+) -> Result<RunArmReports, RunError> {
     let config = ReportConfig { port: Some(port), codes_port, clock, ..ReportConfig::default() };
-    ReportReader::connect(host, config)
+    RunArmReports::connect(host, config)
         .map_err(|e| RunError::Device(format!("arm report stream at {host}:{port}: {e}")))
 }
 

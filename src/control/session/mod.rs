@@ -30,13 +30,13 @@ use crate::control::stop_supervisor::StopConfirmation;
 use crate::control::telemetry::LoopStatus;
 use crate::control::tick::{ControlLoop, Devices, Health, LoopIo, Outcome, Program};
 use crate::devices::arm::{ClientConfig, ReportKind, RunArm, ServoReplies, COMMAND_PORT};
+#[cfg(feature = "stub")]
+use crate::devices::stub::{start_stub, EmbeddedStub};
 use crate::devices::LightSpec;
 use crate::devices::{self as run_devices, CameraSpec, DeviceChoice, DeviceError, RunDevices};
 use crate::exit;
 use crate::rt::{self, slot::LatestSlot, slot::SlotReader, RtOptions};
 use arm_link::{connect_reports, first_report, resolve, spawn_report_reader};
-#[cfg(feature = "stub")]
-use arm_link::{start_stub, EmbeddedStub};
 use devices::{collect_late_frames, record_pose, start_recorder, target_scene, TargetScene};
 use hitl_hal::{Arm, ArmState, Joints, MonotonicClock};
 use hitl_perception::{backend_from_spec, spawn_worker, BackendSpec, ReregisterPolicy};
@@ -56,7 +56,7 @@ use std::time::Duration;
 
 /// A `--stub-fault KIND[:VALUE]@SECONDS`, parsed.
 #[cfg(feature = "stub")]
-pub type StubFault = hitl_sim_stub::Fault;
+pub use crate::devices::stub::StubFault;
 
 /// A `--stub-fault` in a build without the embedded stub: never parses.
 #[cfg(not(feature = "stub"))]
@@ -312,7 +312,7 @@ impl ArmTargetLink {
     fn report_port(&self, kind: ReportKind) -> u16 {
         #[cfg(feature = "stub")]
         if let Some(s) = &self.stub {
-            return s.handle.report_addr(kind).map_or(kind.default_port(), |a| a.port());
+            return s.report_addr(kind).map_or(kind.default_port(), |a| a.port());
         }
         kind.default_port()
     }
@@ -320,11 +320,7 @@ impl ArmTargetLink {
     /// Shut the stub down; where its arm ended.
     #[cfg(feature = "stub")]
     fn close(self) -> Option<Joints> {
-        self.stub.map(|s| {
-            let q = s.handle.plant_joints();
-            s.handle.shutdown();
-            q
-        })
+        self.stub.map(EmbeddedStub::close)
     }
 }
 
@@ -332,9 +328,8 @@ fn start_arm_target(req: &RunRequest, scene: &TargetScene) -> Result<ArmTargetLi
     match &req.target {
         #[cfg(feature = "stub")]
         ArmTarget::Stub { faults } => {
-            let faults: Vec<String> = faults.iter().map(ToString::to_string).collect();
-            let stub = start_stub(&faults, &req.lab, scene)?;
-            let cmd_addr = stub.handle.cmd_addr();
+            let stub = start_stub(faults, &req.lab, &scene.model, scene.scale)?;
+            let cmd_addr = stub.cmd_addr();
             Ok(ArmTargetLink { cmd_addr, report_host: cmd_addr.ip(), stub: Some(stub) })
         }
         #[cfg(not(feature = "stub"))]
@@ -375,12 +370,7 @@ fn open_and_start_devices(
         runtime,
         clock,
         #[cfg(feature = "stub")]
-        sim: target.stub.as_ref().map(|s| run_devices::SimScene {
-            lab_model: &s.lab_model,
-            arm: &s.arm,
-            light: &s.light,
-            inputs: s.handle.inputs(),
-        }),
+        sim: target.stub.as_ref().map(EmbeddedStub::scene),
     };
     #[cfg(not(feature = "stub"))]
     let _ = target;

@@ -1,0 +1,73 @@
+//! The embedded MuJoCo stub of the arm, camera and light (SITL): started on loopback for a run
+//! that names no `--arm`, with the faults to inject (`--stub-fault`), and the pieces of its scene
+//! that the simulated camera and light share with it.
+
+use super::{DeviceError, SimScene};
+use hitl_hal::Joints;
+use hitl_sim_stub::mjcf::TargetModel as StubTarget;
+use hitl_sim_stub::mujoco_plant::{LabModel, MujocoPlant, SharedArmState};
+use hitl_sim_stub::{Stub, StubConfig, StubHandle};
+use hitl_trajectories::lab::LabConfig;
+use std::net::SocketAddr;
+
+/// A `--stub-fault KIND[:VALUE]@SECONDS`, parsed.
+pub type StubFault = hitl_sim_stub::Fault;
+
+/// The embedded stub: the arm server and its scene.
+pub struct EmbeddedStub {
+    handle: StubHandle,
+    lab_model: LabModel,
+    arm: SharedArmState,
+    light: hitl_sim_stub::camera::LightLevel,
+}
+
+/// Start the stub on loopback for `lab`, with `target` (in model units) shown at `scale`, and
+/// `faults` scheduled from its start.
+pub fn start_stub(
+    faults: &[StubFault],
+    lab: &LabConfig,
+    target: &hitl_perception::TargetModel,
+    scale: f64,
+) -> Result<EmbeddedStub, DeviceError> {
+    let stub_target = StubTarget {
+        mesh: Some(target.vertices_faces()),
+        greatest_dimension_m: target.greatest_dimension_m() * scale,
+    };
+    let lab_model = LabModel::generated(lab, &stub_target)
+        .map_err(|e| DeviceError::Failed(format!("stub scene: {e}")))?;
+    let plant = MujocoPlant::from_lab_model(lab_model.clone());
+    let arm = plant.shared_state();
+    let config = StubConfig { faults: faults.to_vec(), ..StubConfig::ephemeral() };
+    let handle = Stub::start(config, Box::new(plant))
+        .map_err(|e| DeviceError::Failed(format!("stub: {e}")))?;
+    Ok(EmbeddedStub { handle, lab_model, arm, light: Default::default() })
+}
+
+impl EmbeddedStub {
+    /// The stub's command port.
+    pub fn cmd_addr(&self) -> SocketAddr {
+        self.handle.cmd_addr()
+    }
+
+    /// Where the stub serves the report stream `kind`, if it does.
+    pub fn report_addr(&self, kind: super::arm::ReportKind) -> Option<SocketAddr> {
+        self.handle.report_addr(kind)
+    }
+
+    /// The scene the simulated camera, light and inputs share with the stub.
+    pub fn scene(&self) -> SimScene<'_> {
+        SimScene {
+            lab_model: &self.lab_model,
+            arm: &self.arm,
+            light: &self.light,
+            inputs: self.handle.inputs(),
+        }
+    }
+
+    /// Shut the stub down; where its arm ended.
+    pub fn close(self) -> Joints {
+        let q = self.handle.plant_joints();
+        self.handle.shutdown();
+        q
+    }
+}
