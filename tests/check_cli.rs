@@ -154,12 +154,20 @@ fn a_safe_trajectory_passes_with_its_report() {
 }
 
 #[test]
+fn a_rate_the_run_would_refuse_is_warned_about() {
+    expect("safe.npz", &["--rate", "300"], 0, &["SAFE", "--rate 300 Hz is above the 250 Hz"]);
+    let o = check("safe.npz", &["--rate", "250"]);
+    assert!(!o.text.contains("warning: --rate"), "{}", o.text);
+}
+
+#[test]
 fn json_report_is_one_object() {
     let o = check("safe.npz", &["--json", "--rate", "500", "--speed-scale", "0.5"]);
     assert_eq!(o.code, 0, "{}", o.text);
     let v: serde_json::Value = serde_json::from_str(o.text.trim()).expect("one JSON object");
     assert_eq!(v["safe"], true);
     assert_eq!(v["rate_hz"], 500.0);
+    assert_eq!(v["rate_refused_by_run"], true, "500 Hz is above what a box receives");
     assert_eq!(v["ticks"], 4001);
     assert_eq!(v["joints"].as_array().map(Vec::len), Some(7));
     assert_eq!(v["clearances"].as_array().map(Vec::len), Some(10));

@@ -10,7 +10,7 @@ use crate::exit;
 use hitl_trajectories::lab::LabConfig;
 use hitl_trajectories::npz::{self, Loaded};
 use hitl_trajectories::preflight::{self, PreflightReport};
-use hitl_trajectories::timing::{SetpointTable, DEFAULT_RATE_HZ};
+use hitl_trajectories::timing::{SetpointTable, DEFAULT_RATE_HZ, XARM_MAX_SERVO_RATE_HZ};
 use std::fmt::Write as _;
 use std::path::{Path, PathBuf};
 
@@ -166,11 +166,20 @@ pub fn run(args: CheckArgs) -> u8 {
         }
     };
     let report = &checked.report;
+    let rate_refused_by_run = args.rate > XARM_MAX_SERVO_RATE_HZ;
+    if rate_refused_by_run && !args.json {
+        crate::errln!(
+            "hitl check: warning: --rate {} Hz is above the {XARM_MAX_SERVO_RATE_HZ} Hz an xArm \
+             box receives: hitl run refuses it (check at the rate you will run at)",
+            args.rate
+        );
+    }
     if args.json {
         let mut v = serde_json::to_value(report).unwrap_or_default();
         if let Some(obj) = v.as_object_mut() {
             obj.insert("file".into(), args.traj.display().to_string().into());
             obj.insert("load_warnings".into(), checked.loaded.warnings.clone().into());
+            obj.insert("rate_refused_by_run".into(), rate_refused_by_run.into());
             obj.insert("lead_in_s".into(), (report.lead_in_ticks as f64 / report.rate_hz).into());
             obj.insert("lead_out_s".into(), (report.lead_out_ticks as f64 / report.rate_hz).into());
             obj.insert("speed_scale_to_pass".into(), checked.speed_scale_to_pass.into());
