@@ -6,9 +6,11 @@
 #                libOrbbecSDK.so (Orbbec SDK 2.9.3, loaded at run time by the Orbbec driver),
 #                unpacked from their PyPI wheels; cargo and the binaries find them without exports
 #   .venv/       Python test peers: numpy, mcap, mcap-protobuf-support, xarm-python-sdk, onnx
-#   Debian       pkg-config and libudev-dev (serial port enumeration), and rt-tests (cyclictest,
-#                the machine's own wake-up floor that `hitl bench loop` compares with), when
-#                missing and we are root
+#   Debian       pkg-config and libudev-dev (serial port enumeration), rt-tests (cyclictest,
+#                the machine's own wake-up floor that `hitl bench loop` compares with), and
+#                libegl1, libegl-mesa0, libgl1-mesa-dri (the simulated camera renders with
+#                MuJoCo's OpenGL renderer on an offscreen EGL device: a GPU's, or Mesa's software
+#                one on a machine without), when missing and we are root
 set -euo pipefail
 cd "$(dirname "$0")/.."
 ROOT=$(pwd)
@@ -24,7 +26,7 @@ say() { printf 'setup: %s\n' "$*"; }
 
 # --- Debian packages the build needs -------------------------------------------------------
 need_pkgs=()
-for p in pkg-config libudev-dev rt-tests; do
+for p in pkg-config libudev-dev rt-tests libegl1 libegl-mesa0 libgl1-mesa-dri; do
   dpkg-query -W -f='${Status}' "$p" 2>/dev/null | grep -q 'install ok installed' || need_pkgs+=("$p")
 done
 if [ ${#need_pkgs[@]} -gt 0 ]; then

@@ -21,7 +21,8 @@ pub enum Which {
     /// servo_j round trips on loopback against the stub, the command rate it sustains, its
     /// real-time factor.
     Protocol,
-    /// Simulated camera frames/s at 320x256 and 1280x1024, trigger-to-frame latency.
+    /// Simulated camera frames/s (colour + depth + mask) at 320x256, 1280x800 and 1280x1024 from
+    /// MuJoCo's renderer next to the ray cast, idle and with --load; trigger-to-frame latency.
     Render,
     /// Sustained recording of depth + colour at 30 fps plus 250 Hz telemetry, side by side with
     /// numpy savez_compressed per depth frame.
@@ -125,7 +126,7 @@ pub fn run(args: BenchArgs) -> u8 {
             }
         }
         #[cfg(feature = "stub")]
-        Which::Render => hitl_sim_stub::camera::bench_render(),
+        Which::Render => hitl_sim_stub::camera::bench_render(args.load),
         #[cfg(not(feature = "stub"))]
         Which::Protocol | Which::Render => {
             crate::errln!("hitl bench: this build has no stub");

@@ -13,7 +13,11 @@ use std::str::FromStr;
 /// The camera chosen on the command line.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub enum CameraSpec {
-    /// The stub's ray-cast RGB-D camera (needs the embedded stub).
+    /// The stub's simulated RGB-D camera (needs the embedded stub), drawn by MuJoCo's own
+    /// OpenGL renderer on an offscreen EGL device (Mesa's software one on a machine without a
+    /// GPU); without a usable device the run stops before motion (exit 5) naming the missing
+    /// package. The stub's ray cast is not offered here: it is 4-7x slower, flat-shaded, and
+    /// kept only for `hitl bench render` and as the renderer's test reference.
     Sim,
     /// An Orbbec RGB-D camera through the Orbbec SDK, triggered as chosen: `orbbec` (hardware
     /// where the model documents it, which every supported model does), `orbbec:hardware`, or
@@ -134,7 +138,7 @@ pub fn open_camera(
             };
             let cam =
                 SimCamera::new(sim.lab_model.clone(), sim.arm.clone(), sim.light.clone(), config)
-                    .map_err(|e| DeviceError::Failed(format!("simulated camera: {e}")))?;
+                    .map_err(|e| DeviceError::Failed(e.to_string()))?;
             RunCamera {
                 dev: Box::new(Kinds::new(Unmanaged(cam))),
                 name: "simulated camera".into(),

@@ -1,12 +1,19 @@
-//! The simulated camera's benchmark (`hitl bench render`): frames per second of the ray-casting
-//! renderer at 320x256 and 1280x1024, and trigger-to-frame latency through [`SimCamera`].
+//! The simulated camera's benchmark (`hitl bench render`): frames per second of colour + depth +
+//! mask from MuJoCo's renderer and from the ray cast, side by side in the same run, at 320x256,
+//! 1280x800 and 1280x1024, idle and (with `load`) with every core busy; and trigger-to-frame
+//! latency through [`SimCamera`].
 
-use super::{render_capture, FrameNoise, LightLevel, Preset, Renderer, SimCamera, SimCameraConfig};
+use super::{
+    capture_with, render_capture, FrameNoise, GlRenderer, LightLevel, Preset, Renderer, SimCamera,
+    SimCameraConfig,
+};
 use crate::mujoco_plant::{ArmSample, LabModel, SharedArmState};
-use hitl_hal::{CaptureRequest, Clock, Joints, MonotonicClock, RgbdCamera};
+use hitl_hal::{CaptureRequest, Clock, Intrinsics, Joints, MonotonicClock, RgbdCamera};
 use hitl_trajectories::kinematics::{camera_pose, first_joint_beyond_limits};
 use hitl_trajectories::lab::LabConfig;
 use serde_json::json;
+use std::sync::atomic::{AtomicBool, Ordering};
+use std::sync::Arc;
 use std::time::{Duration, Instant};
 
 /// A pose of the arm, in the vertical plane through the base and the target (joints 2, 4 and 6
@@ -59,17 +66,90 @@ pub fn look_at_target(lab: &LabConfig, distance_m: f64) -> Joints {
     [yaw, x[0], 0.0, x[1], 0.0, x[2], 0.0]
 }
 
-fn frames_per_second(renderer: &mut Renderer, q: &Joints, w: u32, h: u32, frames: usize) -> f64 {
-    let intr = Preset::Wfov.at(w, h);
-    let start = Instant::now();
-    for _ in 0..frames {
-        let _ = render_capture(renderer, q, &intr, 1.0, &mut FrameNoise::none());
+/// Frames per second of `render` over about `seconds` (at least 2 frames).
+fn frames_per_second(mut render: impl FnMut() -> bool, seconds: f64) -> Option<f64> {
+    if !render() {
+        return None; // the first frame (warm-up, context build) is not counted
     }
-    frames as f64 / start.elapsed().as_secs_f64()
+    let start = Instant::now();
+    let mut frames = 0u32;
+    while frames < 2 || start.elapsed().as_secs_f64() < seconds {
+        if !render() {
+            return None;
+        }
+        frames += 1;
+    }
+    Some(f64::from(frames) / start.elapsed().as_secs_f64())
 }
 
-/// Run the benchmark on the default lab and return its figures.
-pub fn bench_render() -> serde_json::Value {
+/// Busy threads, one per core, until `stop`: half stream through a frame-sized buffer (as the
+/// recorder does), half do dense floating point (as perception does).
+fn spawn_load(stop: &Arc<AtomicBool>) -> Vec<std::thread::JoinHandle<()>> {
+    let cores = std::thread::available_parallelism().map_or(2, |n| n.get());
+    (0..cores)
+        .map(|i| {
+            let stop = Arc::clone(stop);
+            std::thread::spawn(move || {
+                let mut buf = vec![0u8; 8 << 20];
+                let mut x = 1.0f64;
+                while !stop.load(Ordering::Relaxed) {
+                    if i % 2 == 0 {
+                        for (k, b) in buf.iter_mut().enumerate() {
+                            *b = b.wrapping_mul(31).wrapping_add(k as u8);
+                        }
+                    } else {
+                        for k in 0..200_000 {
+                            x = (x * 1.000001 + f64::from(k)).sqrt();
+                        }
+                    }
+                    std::hint::black_box((&buf, x));
+                }
+            })
+        })
+        .collect()
+}
+
+/// The sizes the benchmark renders, with their intrinsics.
+fn sizes() -> [(&'static str, Intrinsics); 3] {
+    [
+        ("320x256", Preset::Wfov.at(320, 256)),
+        ("1280x800", Preset::Orbbec.at(1280, 800)),
+        ("1280x1024", Preset::Wfov.at(1280, 1024)),
+    ]
+}
+
+/// Frames/s of both renderers at every size, under whatever load is running.
+fn figures(gl: &mut Option<GlRenderer>, ray: &mut Renderer, q: &Joints) -> serde_json::Value {
+    let mut out = serde_json::Map::new();
+    for (name, intr) in sizes() {
+        let mujoco = gl.as_mut().and_then(|gl| {
+            frames_per_second(
+                || capture_with(gl, q, &intr, 1.0, &mut FrameNoise::none()).is_ok(),
+                2.0,
+            )
+        });
+        let ray_cast = frames_per_second(
+            || {
+                let _ = render_capture(ray, q, &intr, 1.0, &mut FrameNoise::none());
+                true
+            },
+            1.0,
+        );
+        let ratio = match (mujoco, ray_cast) {
+            (Some(m), Some(r)) if r > 0.0 => Some(m / r),
+            _ => None,
+        };
+        out.insert(
+            name.into(),
+            json!({ "mujoco_fps": mujoco, "ray_cast_fps": ray_cast, "mujoco_over_ray_cast": ratio }),
+        );
+    }
+    serde_json::Value::Object(out)
+}
+
+/// Run the benchmark on the default lab and return its figures; `load` adds a run with every
+/// core busy.
+pub fn bench_render(load: bool) -> serde_json::Value {
     let lab = LabConfig::default();
     let model = match LabModel::new(&lab, None) {
         Ok(m) => m,
@@ -80,8 +160,22 @@ pub fn bench_render() -> serde_json::Value {
         Ok(r) => r,
         Err(e) => return json!({ "error": e }),
     };
-    let small = frames_per_second(&mut renderer, &q, 320, 256, 20);
-    let large = frames_per_second(&mut renderer, &q, 1280, 1024, 3);
+    let (mut gl, gl_error) = match GlRenderer::new(model.clone(), 320, 256) {
+        Ok(gl) => (Some(gl), None),
+        Err(e) => (None, Some(e.to_string())),
+    };
+    let idle = figures(&mut gl, &mut renderer, &q);
+    let loaded = load.then(|| {
+        let stop = Arc::new(AtomicBool::new(false));
+        let threads = spawn_load(&stop);
+        let f = figures(&mut gl, &mut renderer, &q);
+        stop.store(true, Ordering::Relaxed);
+        for t in threads {
+            let _ = t.join();
+        }
+        f
+    });
+    drop(gl);
     // Trigger-to-frame latency through the camera's thread at 320x256.
     let clock = MonotonicClock::new();
     let arm = SharedArmState::new(ArmSample { q, sim_time_s: 0.0 });
@@ -116,15 +210,20 @@ pub fn bench_render() -> serde_json::Value {
             .unwrap_or(f64::NAN)
     };
     // The machine's load when measured: the figures scale with the cores actually free.
-    let load = std::fs::read_to_string("/proc/loadavg")
+    let loadavg = std::fs::read_to_string("/proc/loadavg")
         .ok()
         .and_then(|l| l.split_whitespace().next().and_then(|v| v.parse::<f64>().ok()));
     json!({
-        "renderer": "mj_multiRay ray casting",
-        "threads": renderer.threads(),
-        "loadavg_1m": load,
-        "fps_320x256": small,
-        "fps_1280x1024": large,
+        "bench": "render",
+        "what": "frames/s of colour + depth + mask, the arm looking at the target from 0.3 m",
+        "mujoco": "MuJoCo's OpenGL renderer, offscreen EGL (two passes: scene, target alone)",
+        "mujoco_error": gl_error,
+        "ray_cast": "mj_multiRay, one ray per pixel",
+        "ray_cast_threads": renderer.threads(),
+        "cores": std::thread::available_parallelism().map_or(0, |n| n.get()),
+        "loadavg_1m": loadavg,
+        "idle": idle,
+        "load": loaded,
         "trigger_to_frame_ms_320x256": { "p50": pct(0.5), "p99": pct(0.99), "n": latencies_ms.len() },
     })
 }

@@ -12,6 +12,7 @@
 use crate::mujoco_plant::LabModel;
 use hitl_hal::{Intrinsics, Joints, DOF};
 use mujoco_rs::prelude::{MjData, MjModel};
+use mujoco_rs::wrappers::mj_model::traits::ModelType;
 use nalgebra::{Isometry3, Matrix3, Point3, Rotation3, Translation3, UnitQuaternion, Vector3};
 use std::sync::Arc;
 
@@ -55,7 +56,6 @@ pub struct Renderer {
     data: Vec<MjData<Arc<MjModel>>>,
     /// The camera's own body: its geoms never block the view.
     camera_body: Option<usize>,
-    arm_root: Option<usize>,
     albedo: Vec<[f32; 3]>,
     is_target: Vec<bool>,
     dirs: Vec<[f64; 3]>,
@@ -79,8 +79,6 @@ impl Renderer {
             }
         };
         let target_root = lab.target_body.map(|b| m.body_rootid()[b]);
-        let parents = m.body_parentid();
-        let arm_root = (0..lab.arm_body.len()).find(|&b| lab.arm_body[b] && parents[b] == 0);
         let ngeom = m.geom_bodyid().len();
         let mut albedo = Vec::with_capacity(ngeom);
         let mut is_target = Vec::with_capacity(ngeom);
@@ -97,7 +95,6 @@ impl Renderer {
             lab,
             data,
             camera_body,
-            arm_root,
             albedo,
             is_target,
             dirs: Vec::new(),
@@ -142,31 +139,12 @@ impl Renderer {
 
     /// Camera pose (OpenCV axes) in the lab frame for the current joints.
     pub fn camera_in_lab(&self) -> Isometry3<f64> {
-        if let Some(s) = self.lab.camera_site {
-            pose(&self.data[0].site_xpos()[s], &self.data[0].site_xmat()[s])
-        } else if let Some(c) = self.lab.camera {
-            let mj = pose(&self.data[0].cam_xpos()[c], &self.data[0].cam_xmat()[c]);
-            mj * UnitQuaternion::from_axis_angle(&Vector3::x_axis(), std::f64::consts::PI)
-        } else {
-            Isometry3::identity()
-        }
+        camera_in_lab(&self.lab, &self.data[0])
     }
 
     /// The arm base's pose in the lab frame.
     pub fn base_in_lab(&self) -> Isometry3<f64> {
-        match self.arm_root {
-            Some(b) => {
-                let p = self.data[0].xpos()[b];
-                let q = self.data[0].xquat()[b];
-                Isometry3::from_parts(
-                    Translation3::new(p[0], p[1], p[2]),
-                    UnitQuaternion::from_quaternion(nalgebra::Quaternion::new(
-                        q[0], q[1], q[2], q[3],
-                    )),
-                )
-            }
-            None => Isometry3::identity(),
-        }
+        base_in_lab(&self.lab, &self.data[0])
     }
 
     /// Direction the Sun's light travels in the lab frame (unit).
@@ -326,4 +304,33 @@ fn pose(p: &[f64; 3], m: &[f64; 9]) -> Isometry3<f64> {
         Translation3::new(p[0], p[1], p[2]),
         UnitQuaternion::from_rotation_matrix(&r),
     )
+}
+
+/// Camera pose (OpenCV axes) in the lab frame from `data`'s kinematics: the `camera_cv` site, or
+/// the flange camera turned from MuJoCo's axes (looking down -z, y up).
+pub fn camera_in_lab<M: ModelType>(lab: &LabModel, data: &MjData<M>) -> Isometry3<f64> {
+    if let Some(s) = lab.camera_site {
+        pose(&data.site_xpos()[s], &data.site_xmat()[s])
+    } else if let Some(c) = lab.camera {
+        let mj = pose(&data.cam_xpos()[c], &data.cam_xmat()[c]);
+        mj * UnitQuaternion::from_axis_angle(&Vector3::x_axis(), std::f64::consts::PI)
+    } else {
+        Isometry3::identity()
+    }
+}
+
+/// The arm base's pose in the lab frame from `data`'s kinematics.
+pub fn base_in_lab<M: ModelType>(lab: &LabModel, data: &MjData<M>) -> Isometry3<f64> {
+    let parents = lab.model.body_parentid();
+    match (0..lab.arm_body.len()).find(|&b| lab.arm_body[b] && parents[b] == 0) {
+        Some(b) => {
+            let p = data.xpos()[b];
+            let q = data.xquat()[b];
+            Isometry3::from_parts(
+                Translation3::new(p[0], p[1], p[2]),
+                UnitQuaternion::from_quaternion(nalgebra::Quaternion::new(q[0], q[1], q[2], q[3])),
+            )
+        }
+        None => Isometry3::identity(),
+    }
 }
