@@ -250,6 +250,8 @@ enum Then {
 struct BoxLog {
     levels: Vec<u16>,
     fires: Vec<(u64, u8)>,
+    /// The fire time each `F` was acknowledged with, on the box's clock (us).
+    fire_us: Vec<u64>,
 }
 
 fn box_peer(mut peer: PtyPeer, then: Then, done: Arc<AtomicBool>) -> BoxLog {
@@ -274,7 +276,11 @@ fn box_peer(mut peer: PtyPeer, then: Then, done: Arc<AtomicBool>) -> BoxLog {
                 "F" => log.fires.push((f[2].parse().expect("tick"), f[3].parse().expect("mask"))),
                 other => panic!("unknown command {other:?} in {text:?}"),
             }
-            peer.write(format!("A {} {}\n", f[1], us()).as_bytes());
+            let at = us();
+            if f[0] == "F" {
+                log.fire_us.push(at);
+            }
+            peer.write(format!("A {} {at}\n", f[1]).as_bytes());
         }
         if !acted && log.levels.contains(&600) {
             acted = true;
@@ -311,6 +317,11 @@ fn the_trigger_box_follows_the_light_schedule_and_fires_at_the_capture_ticks() {
     let fired: Vec<u64> = log.fires.iter().map(|f| f.0).collect();
     assert_eq!(fired, run.capture_ticks(), "F lines at the capture ticks");
     assert!(log.fires.iter().all(|f| f.1 == 1), "the camera line only: {:?}", log.fires);
+    // Each acknowledged fire is recorded with the box's own fire time.
+    let recorded: Vec<(u64, u64)> =
+        run.rec.trigger_fired.iter().map(|m| (m.tick, m.device_us)).collect();
+    let acked: Vec<(u64, u64)> = fired.iter().copied().zip(log.fire_us.iter().copied()).collect();
+    assert_eq!(recorded, acked, "/trigger/fired");
     assert!(run.rec.events.is_empty(), "{:?}", run.rec.events);
 }
 

@@ -27,7 +27,7 @@ pub use health::RecorderHealth;
 pub use metadata::{RunMetadata, SunPhaseTrack};
 pub use msg::{
     ArmStateMsg, CaptureSyncMsg, DepthImage, EventDetail, EventKind, FrameRecord, LightMsg, Phase,
-    Plane, Pose, PoseStamped, SafetyEventMsg, SetpointMsg, TfMsg, TimingMsg,
+    Plane, Pose, PoseStamped, SafetyEventMsg, SetpointMsg, TfMsg, TimingMsg, TriggerFiredMsg,
 };
 pub use queues::{QueueCapacity, Telemetry};
 pub use recorder::{RecordSummary, Recorder, RecorderConfig, RecorderHandle};

@@ -113,6 +113,18 @@ pub struct LightMsg {
     pub level: f32,
 }
 
+/// `/trigger/fired`: a trigger-line fire the trigger box acknowledged, with the time it says it
+/// fired on its own clock (the exposure's start for a hardware-triggered camera).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+pub struct TriggerFiredMsg {
+    /// Host monotonic time the acknowledgement arrived, nanoseconds.
+    pub t_ns: u64,
+    /// The tick the fire was asked for.
+    pub tick: u64,
+    /// When the box fired, on its clock, microseconds.
+    pub device_us: u64,
+}
+
 /// What happened, in the words of the safety case. Written as kebab-case strings.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
 #[serde(rename_all = "kebab-case")]

@@ -6,7 +6,7 @@
 
 use crate::msg::{
     ArmStateMsg, EventKind, FrameRecord, LightMsg, PoseStamped, SafetyEventMsg, SetpointMsg, TfMsg,
-    TimingMsg,
+    TimingMsg, TriggerFiredMsg,
 };
 use crossbeam_queue::ArrayQueue;
 use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
@@ -40,9 +40,10 @@ pub(crate) enum Counted {
     Event = 4,
     Tf = 5,
     Estimate = 6,
+    Fired = 7,
 }
 
-pub(crate) const COUNTED_TOPICS: [(Counted, &str); 7] = [
+pub(crate) const COUNTED_TOPICS: [(Counted, &str); 8] = [
     (Counted::Setpoint, crate::topics::SETPOINT),
     (Counted::State, crate::topics::STATE),
     (Counted::Timing, crate::topics::TIMING),
@@ -50,6 +51,7 @@ pub(crate) const COUNTED_TOPICS: [(Counted, &str); 7] = [
     (Counted::Event, crate::topics::EVENT),
     (Counted::Tf, crate::topics::TF),
     (Counted::Estimate, crate::topics::POSE_ESTIMATE),
+    (Counted::Fired, crate::topics::TRIGGER_FIRED),
 ];
 
 pub(crate) struct Queues {
@@ -60,8 +62,9 @@ pub(crate) struct Queues {
     pub event: ArrayQueue<SafetyEventMsg>,
     pub tf: ArrayQueue<TfMsg>,
     pub estimate: ArrayQueue<PoseStamped>,
+    pub fired: ArrayQueue<TriggerFiredMsg>,
     pub frames: ArrayQueue<FrameRecord>,
-    pub drops: [AtomicU64; 7],
+    pub drops: [AtomicU64; 8],
     pub frames_not_recorded: AtomicU64,
     /// Set by the recorder when it stops taking messages (finished): pushes become no-ops.
     pub closed: AtomicBool,
@@ -94,6 +97,7 @@ impl Telemetry {
                 event: ArrayQueue::new(cap.events.max(1)),
                 tf: ArrayQueue::new(t),
                 estimate: ArrayQueue::new(t),
+                fired: ArrayQueue::new(t),
                 frames: ArrayQueue::new(cap.frames.max(1)),
                 drops: Default::default(),
                 frames_not_recorded: AtomicU64::new(0),
@@ -126,6 +130,11 @@ impl Telemetry {
     /// `/light/state`. Never blocks or allocates (tick-safe).
     pub fn push_light(&self, m: &LightMsg) {
         self.push_counted(&self.q.light, Counted::Light, *m);
+    }
+
+    /// `/trigger/fired`. Never blocks or allocates (tick-safe).
+    pub fn push_fired(&self, m: &TriggerFiredMsg) {
+        self.push_counted(&self.q.fired, Counted::Fired, *m);
     }
 
     /// `/safety/event`. Never blocks; allocates nothing for [`SafetyEventMsg::numeric`] events.

@@ -5,6 +5,7 @@
 use crate::error::ReadError;
 use crate::msg::{
     ArmStateMsg, CaptureSyncMsg, LightMsg, Pose, PoseStamped, SetpointMsg, TfMsg, TimingMsg,
+    TriggerFiredMsg,
 };
 use crate::topics;
 use foxglove::messages as fg;
@@ -130,6 +131,8 @@ pub struct Recording {
     pub states: Vec<ArmStateMsg>,
     pub timing: Vec<TimingMsg>,
     pub lights: Vec<LightMsg>,
+    /// `/trigger/fired`, in tick order.
+    pub trigger_fired: Vec<TriggerFiredMsg>,
     /// `/camera/sync`, one per recorded frame, in trigger order.
     pub capture_sync: Vec<CaptureSyncMsg>,
     pub events: Vec<EventRecord>,
@@ -271,6 +274,7 @@ pub fn read_recording(path: &Path) -> Result<Recording, ReadError> {
     rec.states.sort_by_key(|m| m.t_ns);
     rec.timing.sort_by_key(|m| m.t_ns);
     rec.lights.sort_by_key(|m| m.t_ns);
+    rec.trigger_fired.sort_by_key(|m| m.tick);
     rec.capture_sync.sort_by_key(|m| m.trigger_ns);
     rec.events.sort_by_key(|m| m.t_ns);
     rec.tf.sort_by_key(|m| m.t_ns);
@@ -287,6 +291,9 @@ fn decode_into(rec: &mut Recording, m: &RawMessage<'_>) -> Result<(), String> {
         topics::STATE => rec.states.push(serde_json::from_slice(m.data).map_err(|x| e(&x))?),
         topics::TIMING => rec.timing.push(serde_json::from_slice(m.data).map_err(|x| e(&x))?),
         topics::LIGHT => rec.lights.push(serde_json::from_slice(m.data).map_err(|x| e(&x))?),
+        topics::TRIGGER_FIRED => {
+            rec.trigger_fired.push(serde_json::from_slice(m.data).map_err(|x| e(&x))?)
+        }
         topics::CAPTURE_SYNC => {
             rec.capture_sync.push(serde_json::from_slice(m.data).map_err(|x| e(&x))?)
         }

@@ -309,6 +309,10 @@ impl Worker {
             n += 1;
             self.with_sink(|s| s.light(&m));
         }
+        while let Some(m) = q.fired.pop() {
+            n += 1;
+            self.with_sink(|s| s.trigger_fired(&m));
+        }
         while let Some(m) = q.tf.pop() {
             n += 1;
             self.with_sink(|s| s.tf(&m));

@@ -9,7 +9,7 @@ use crate::error::RecordError;
 use crate::metadata::RunMetadata;
 use crate::msg::{
     metres_to_mm, ArmStateMsg, CaptureSyncMsg, DepthImage, EventDetail, FrameRecord, LightMsg,
-    Pose, PoseStamped, SafetyEventMsg, SetpointMsg, TfMsg, TimingMsg,
+    Pose, PoseStamped, SafetyEventMsg, SetpointMsg, TfMsg, TimingMsg, TriggerFiredMsg,
 };
 use crate::topics;
 use foxglove::messages as fg;
@@ -37,10 +37,11 @@ pub(crate) enum Ch {
     Mask,
     Calibration,
     CaptureSync,
+    TriggerFired,
     Stats,
 }
 
-pub(crate) const CHANNELS: [Ch; 14] = [
+pub(crate) const CHANNELS: [Ch; 15] = [
     Ch::Setpoint,
     Ch::State,
     Ch::Timing,
@@ -54,6 +55,7 @@ pub(crate) const CHANNELS: [Ch; 14] = [
     Ch::Mask,
     Ch::Calibration,
     Ch::CaptureSync,
+    Ch::TriggerFired,
     Ch::Stats,
 ];
 
@@ -73,6 +75,7 @@ impl Ch {
             Ch::Mask => topics::MASK,
             Ch::Calibration => topics::CALIBRATION,
             Ch::CaptureSync => topics::CAPTURE_SYNC,
+            Ch::TriggerFired => topics::TRIGGER_FIRED,
             Ch::Stats => topics::RECORDER_STATS,
         }
     }
@@ -256,6 +259,9 @@ impl McapSink {
     }
     pub fn light(&mut self, m: &LightMsg) -> Result<(), RecordError> {
         self.json(Ch::Light, m.t_ns, m)
+    }
+    pub fn trigger_fired(&mut self, m: &TriggerFiredMsg) -> Result<(), RecordError> {
+        self.json(Ch::TriggerFired, m.t_ns, m)
     }
     pub fn event(&mut self, m: &SafetyEventMsg) -> Result<(), RecordError> {
         let (tick, joint, value, limit) = match &m.detail {

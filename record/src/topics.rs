@@ -14,6 +14,8 @@ pub const MASK: &str = "/camera/mask";
 pub const CALIBRATION: &str = "/camera/calibration";
 /// Extension: each frame's trigger and exposure times and their difference (the sync error).
 pub const CAPTURE_SYNC: &str = "/camera/sync";
+/// Extension: every trigger-line fire the trigger box acknowledged (its own fire time).
+pub const TRIGGER_FIRED: &str = "/trigger/fired";
 /// Extension: the recorder's own counters, once a second and at close.
 pub const RECORDER_STATS: &str = "/recorder/stats";
 
@@ -62,6 +64,10 @@ pub(crate) fn json_schema(topic: &str) -> Option<(&'static str, String)> {
         CAPTURE_SYNC => (
             "hitl.CaptureSync",
             r#"{"type":"object","properties":{"tick":{"type":"integer"},"trigger_ns":{"type":"integer"},"exposure_ns":{"type":"integer"},"sync_error_ns":{"type":"integer"}},"required":["tick","trigger_ns","exposure_ns","sync_error_ns"]}"#.to_string(),
+        ),
+        TRIGGER_FIRED => (
+            "hitl.TriggerFired",
+            r#"{"type":"object","properties":{"t_ns":{"type":"integer"},"tick":{"type":"integer"},"device_us":{"type":"integer"}},"required":["t_ns","tick","device_us"]}"#.to_string(),
         ),
         RECORDER_STATS => (
             "hitl.RecorderStats",

@@ -8,10 +8,10 @@ use crate::control::interlocks::{Trip, TripKind};
 use crate::control::setpoint::Phase;
 use crate::control::telemetry::{CaptureOut, SetpointOut, TelemetrySink, TimingOut};
 use crossbeam::queue::ArrayQueue;
-use hitl_hal::{ArmState, RgbdFrame};
+use hitl_hal::{ArmState, FireReport, RgbdFrame};
 use hitl_record::{
     ArmStateMsg, EventKind, LightMsg, Phase as RecPhase, SafetyEventMsg, SetpointMsg, Telemetry,
-    TimingMsg,
+    TimingMsg, TriggerFiredMsg,
 };
 use std::sync::atomic::{AtomicU64, Ordering};
 use std::sync::Arc;
@@ -131,6 +131,16 @@ impl TelemetrySink for RunTelemetry {
     fn light(&self, t_ns: u64, level: f32) {
         if let Some(r) = &self.record {
             r.push_light(&LightMsg { t_ns, level });
+        }
+    }
+
+    fn fired(&self, f: &FireReport) {
+        if let Some(r) = &self.record {
+            r.push_fired(&TriggerFiredMsg {
+                t_ns: f.acked_ns,
+                tick: f.tick,
+                device_us: f.device_us,
+            });
         }
     }
 

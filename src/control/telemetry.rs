@@ -6,7 +6,7 @@
 
 use super::interlocks::Trip;
 use super::setpoint::{Phase, Setpoint};
-use hitl_hal::{ArmState, RgbdFrame};
+use hitl_hal::{ArmState, FireReport, RgbdFrame};
 use std::sync::atomic::{AtomicBool, AtomicU64, AtomicU8, Ordering};
 
 /// `/arm/setpoint`.
@@ -52,6 +52,8 @@ pub trait TelemetrySink {
     fn capture_missed(&self, tick: u64, t_ns: u64);
     /// A frame the camera delivered: moved on (never copied) to the capture intake.
     fn frame(&self, frame: RgbdFrame);
+    /// A trigger-line fire the trigger device acknowledged, with its own fire time.
+    fn fired(&self, f: &FireReport);
 }
 
 /// A sink that keeps nothing (runs without a recording still count ticks in [`LoopStatus`]).
@@ -67,6 +69,7 @@ impl TelemetrySink for NoTelemetry {
     fn trip(&self, _: &Trip) {}
     fn capture_missed(&self, _: u64, _: u64) {}
     fn frame(&self, _: RgbdFrame) {}
+    fn fired(&self, _: &FireReport) {}
 }
 
 /// Live status of the loop for the progress line (atomics; written by the tick).

@@ -294,7 +294,7 @@ where
     }
 
     /// Each device's own health (a fault its I/O task tripped), and the trigger lines'
-    /// acknowledgements taken off their queue.
+    /// acknowledgements (each fire's time on the trigger device's clock) handed to telemetry.
     fn check_device_health(&mut self) {
         let d = &mut self.devices;
         let failed = if d.light.health().is_err() {
@@ -309,7 +309,9 @@ where
         if let Some(device) = failed {
             self.device_failed.get_or_insert(device);
         }
-        while let Ok(Some(_fired)) = self.devices.trigger.poll_fired() {}
+        while let Ok(Some(fired)) = self.devices.trigger.poll_fired() {
+            self.telemetry.fired(&fired);
+        }
     }
 
     /// Approach, playback, settle or stop: which setpoint tick `k` sends, or the end of the run.
