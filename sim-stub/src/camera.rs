@@ -2,7 +2,7 @@
 //! own, delivered as [`RgbdFrame`]s through the HAL's [`RgbdCamera`] trait.
 //!
 //! Two renderers ([`RendererKind`]): MuJoCo's own OpenGL renderer ([`gl`], the default: lit by
-//! the scene's lights with its materials, about 7x the ray cast's frames/s at 1280x1024 on a
+//! the scene's lights with its materials, about 11x the ray cast's frames/s at 1280x1024 on a
 //! 2-core machine with Mesa's software EGL device), and the ray cast ([`render`]: one
 //! `mj_multiRay` per pixel, flat Lambert shading). The ray cast stays for the renderer benchmark
 //! (`hitl bench render` puts the two side by side) and as the independent geometry the

@@ -96,7 +96,8 @@ fn depth_and_mask_match_the_ray_cast() {
     }
     let (j, n_gl, n_ray) = iou(&img.mask, &want.mask);
     assert!(n_ray > 200, "target in view: {n_ray} px");
-    assert!(j > 0.9, "IoU {j:.3} (MuJoCo {n_gl} px, ray cast {n_ray} px)");
+    // One sample per pixel centre, as the ray cast: the same pixels.
+    assert!(j > 0.99, "IoU {j:.3} (MuJoCo {n_gl} px, ray cast {n_ray} px)");
     let gap = median_depth_gap(&img, &want);
     assert!(gap < 0.002, "median depth gap on the target {gap} m");
     // Only 0 and 255 in the mask; the floor around the target has depth, farther than the face.
@@ -128,7 +129,7 @@ fn tilted_and_off_centre_cameras_see_what_the_ray_cast_sees() {
         let want = ray.render_from(&cam, &intr, 1.0, shift);
         let (j, n_gl, n_ray) = iou(&img.mask, &want.mask);
         assert!(n_ray > 100, "{name}: target in view ({n_ray} px)");
-        assert!(j > 0.9, "{name}: IoU {j:.3} (MuJoCo {n_gl} px, ray cast {n_ray} px)");
+        assert!(j > 0.97, "{name}: IoU {j:.3} (MuJoCo {n_gl} px, ray cast {n_ray} px)");
         let gap = median_depth_gap(&img, &want);
         assert!(gap < 0.003, "{name}: median depth gap {gap} m");
     }

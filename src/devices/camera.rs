@@ -16,7 +16,7 @@ pub enum CameraSpec {
     /// The stub's simulated RGB-D camera (needs the embedded stub), drawn by MuJoCo's own
     /// OpenGL renderer on an offscreen EGL device (Mesa's software one on a machine without a
     /// GPU); without a usable device the run stops before motion (exit 5) naming the missing
-    /// package. The stub's ray cast is not offered here: it is 4-7x slower, flat-shaded, and
+    /// package. The stub's ray cast is not offered here: it is about 11x slower, flat-shaded, and
     /// kept only for `hitl bench render` and as the renderer's test reference.
     Sim,
     /// An Orbbec RGB-D camera through the Orbbec SDK, triggered as chosen: `orbbec` (hardware

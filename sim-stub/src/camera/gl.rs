@@ -1,6 +1,7 @@
 //! The MuJoCo-renderer camera: MuJoCo's own OpenGL renderer on an offscreen EGL context (a GPU's
 //! when there is one, Mesa's software device otherwise), lit by the scene's lights with its
-//! materials, about 7x faster than the ray cast at 1280x1024 on a 2-core machine.
+//! materials, about 11x the ray cast's frames/s at 1280x1024 on a 2-core machine (53 against
+//! 4.6 frames/s of colour + depth + mask, docs/stub-scene.md).
 //!
 //! One capture is two passes from the same camera: the whole scene (colour and depth), then the
 //! target alone (depth only counts); a pixel is the target's (mask 255) where the target-only
@@ -31,10 +32,6 @@ use nalgebra::{Isometry3, UnitQuaternion, Vector3};
 pub const FAR_M: f64 = 10.0;
 /// Nearest depth drawn, metres.
 pub const NEAR_M: f64 = 0.01;
-/// Vertical principal-point correction, pixels: without it MuJoCo's image sits half a pixel
-/// above the ray cast's and the analytic projection (measured at several focal lengths and
-/// principal points, tests/camera_gl.rs); with it the target's mask matches pixel for pixel.
-const Y_BIAS_PX: f64 = -0.5;
 /// The geom group the target's geoms are drawn in.
 pub const TARGET_GROUP: i32 = 4;
 /// The geom group the camera's own body is moved to, never drawn.
@@ -102,6 +99,9 @@ impl GlRenderer {
             vis.map.zfar = (FAR_M / extent) as f32;
             vis.headlight.diffuse = [0.0; 3];
             vis.headlight.specular = [0.0; 3];
+            // One sample per pixel, at its centre, like the ray cast and a camera's pixel grid:
+            // multisampling (MuJoCo's default 4) costs about half the frame in software.
+            vis.quality.offsamples = 0;
         }
         if let Some(l) = lab.sun {
             m.light_castshadow_mut()[l] = false;
@@ -209,6 +209,9 @@ impl GlRenderer {
         // The whole scene (the camera's own body hidden).
         let mut opts = MjvOption { geomgroup: [1, 1, 1, 1, 1, 0], ..Default::default() };
         renderer.set_opts(opts.clone());
+        if !renderer.rgb_enabled() {
+            renderer.set_rgb_rendering(true);
+        }
         renderer.set_camera(MjvCamera::new_fixed(cam));
         renderer.sync_data(&mut self.data).map_err(err)?;
         renderer.render().map_err(err)?;
@@ -220,8 +223,10 @@ impl GlRenderer {
         };
         depth_m.resize(n, 0.0);
         // The target alone: where its depth is the scene's, the camera sees the target.
+        // (Depth only: not reading the colour back saves a fifth of the frame's time.)
         opts.geomgroup = [0, 0, 0, 0, 1, 0];
         renderer.set_opts(opts);
+        renderer.set_rgb_rendering(false);
         renderer.sync_data(&mut self.data).map_err(err)?;
         renderer.render().map_err(err)?;
         self.target_depth.clear();
@@ -252,12 +257,13 @@ impl GlRenderer {
         self.update_model(|m| {
             // MuJoCo's intrinsics are lengths on a sensor of sensorsize: pixels as the unit, the
             // principal point as an offset from the sensor's centre, x left and y up (found by
-            // rendering against the ray cast: tests/camera_gl.rs). OpenCV's centre of a W-pixel
-            // row is (W - 1) / 2 (integer coordinates are pixel centres).
+            // rendering against the ray cast, which then agree pixel for pixel on the target's
+            // mask: tests/camera_gl.rs). OpenCV's centre of a W-pixel row is (W - 1) / 2
+            // (integer coordinates are pixel centres).
             m.cam_sensorsize_mut()[c] = [intr.width as f32, intr.height as f32];
             let (cx, cy) = (intr.cx + shift[0], intr.cy + shift[1]);
             let px = (f64::from(intr.width) - 1.0) / 2.0 - cx;
-            let py = (f64::from(intr.height) - 1.0) / 2.0 - cy + Y_BIAS_PX;
+            let py = (f64::from(intr.height) - 1.0) / 2.0 - cy;
             m.cam_intrinsic_mut()[c] = [intr.fx as f32, intr.fy as f32, px as f32, py as f32];
             m.cam_fovy_mut()[c] =
                 (2.0 * (f64::from(intr.height) / (2.0 * intr.fy)).atan()).to_degrees();
