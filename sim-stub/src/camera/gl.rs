@@ -294,38 +294,74 @@ impl GlRenderer {
 pub fn missing_packages() -> String {
     let dirs =
         ["/usr/lib/x86_64-linux-gnu", "/usr/lib/aarch64-linux-gnu", "/usr/lib64", "/usr/lib"];
-    let has = |rel: &str| dirs.iter().any(|d| std::path::Path::new(d).join(rel).exists());
+    let has = |path: &str| {
+        if path.starts_with('/') {
+            std::path::Path::new(path).exists()
+        } else {
+            dirs.iter().any(|d| std::path::Path::new(d).join(path).exists())
+        }
+    };
+    let env: Vec<String> =
+        ["__EGL_VENDOR_LIBRARY_FILENAMES", "__EGL_VENDOR_LIBRARY_DIRS", "EGL_PLATFORM"]
+            .iter()
+            .filter_map(|k| std::env::var(k).ok().map(|v| format!("{k}={v}")))
+            .collect();
+    diagnose(has, &env)
+}
+
+/// What to tell the user, given which files exist (`has`: a library path relative to the
+/// library directories, or an absolute path) and the EGL variables set (`env`, `NAME=value`).
+fn diagnose(has: impl Fn(&str) -> bool, env: &[String]) -> String {
     let mut missing = Vec::new();
     if !has("libEGL.so.1") {
         missing.push("libegl1");
     }
-    if !has("libEGL_mesa.so.0") {
+    if !has("libEGL_mesa.so.0") || !has("/usr/share/glvnd/egl_vendor.d/50_mesa.json") {
         missing.push("libegl-mesa0");
     }
     if !has("dri/swrast_dri.so") && !has("dri/kms_swrast_dri.so") {
         missing.push("libgl1-mesa-dri");
     }
-    if missing.is_empty() {
-        let env = ["__EGL_VENDOR_LIBRARY_FILENAMES", "__EGL_VENDOR_LIBRARY_DIRS", "EGL_PLATFORM"]
-            .iter()
-            .filter_map(|k| std::env::var(k).ok().map(|v| format!("{k}={v}")))
-            .collect::<Vec<_>>();
-        if env.is_empty() {
-            "libegl1, libegl-mesa0 and libgl1-mesa-dri are installed, yet no EGL device opened a \
-             context (a GPU driver's EGL vendor file may be broken)"
-                .into()
-        } else {
-            format!(
-                "libegl1, libegl-mesa0 and libgl1-mesa-dri are installed, but the environment \
-                 points EGL elsewhere: {}",
-                env.join(" ")
-            )
-        }
-    } else {
+    if !missing.is_empty() {
         format!(
             "missing Debian package(s) {}: run 'sudo apt-get install {}' (scripts/setup.sh does)",
             missing.join(", "),
             missing.join(" ")
         )
+    } else if env.is_empty() {
+        "libegl1, libegl-mesa0 and libgl1-mesa-dri are installed, yet no EGL device opened a \
+         context (a GPU driver's EGL vendor file may be broken)"
+            .into()
+    } else {
+        format!(
+            "libegl1, libegl-mesa0 and libgl1-mesa-dri are installed, but the environment points \
+             EGL elsewhere: {}",
+            env.join(" ")
+        )
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::diagnose;
+
+    #[test]
+    fn the_missing_package_is_named() {
+        let all = |_: &str| true;
+        let no_mesa_egl = |p: &str| !p.contains("mesa");
+        let no_dri = |p: &str| !p.starts_with("dri/");
+        let nothing = |_: &str| false;
+        let m = diagnose(no_mesa_egl, &[]);
+        assert!(
+            m.contains("package(s) libegl-mesa0:") && m.contains("apt-get install libegl-mesa0"),
+            "{m}"
+        );
+        let m = diagnose(no_dri, &[]);
+        assert!(m.contains("package(s) libgl1-mesa-dri:"), "{m}");
+        let m = diagnose(nothing, &[]);
+        assert!(m.contains("libegl1, libegl-mesa0, libgl1-mesa-dri:"), "{m}");
+        let m = diagnose(all, &["EGL_PLATFORM=x".into()]);
+        assert!(m.contains("installed") && m.contains("EGL_PLATFORM=x"), "{m}");
+        assert!(!diagnose(all, &[]).contains("missing"));
     }
 }
