@@ -10,12 +10,11 @@
 //! telemetry pushes). Load is one busy thread per core doing recorder-like work (compression-sized
 //! memory traffic) and perception-like work (floating-point loops).
 
+use super::load::under_load;
 use crate::rt::{os, Periodic, RtOptions};
 use crossbeam::queue::ArrayQueue;
 use serde_json::{json, Value};
 use std::process::Command;
-use std::sync::atomic::{AtomicBool, Ordering};
-use std::sync::Arc;
 use std::time::Duration;
 
 /// What to measure.
@@ -37,34 +36,6 @@ fn percentiles_us(mut ns: Vec<u64>) -> Value {
     ns.sort_unstable();
     let at = |p: f64| ns[((ns.len() - 1) as f64 * p).round() as usize] as f64 / 1e3;
     json!({ "p50_us": at(0.5), "p99_us": at(0.99), "p999_us": at(0.999), "max_us": at(1.0) })
-}
-
-/// Busy threads that keep both cores loaded until `stop`.
-fn spawn_load(stop: &Arc<AtomicBool>) -> Vec<std::thread::JoinHandle<()>> {
-    let cores = std::thread::available_parallelism().map_or(2, |n| n.get());
-    (0..cores)
-        .map(|i| {
-            let stop = Arc::clone(stop);
-            std::thread::spawn(move || {
-                let mut buf = vec![0u8; 8 << 20];
-                let mut x = 1.0f64;
-                while !stop.load(Ordering::Relaxed) {
-                    if i % 2 == 0 {
-                        // Recorder-like: stream through a frame-sized buffer.
-                        for (k, b) in buf.iter_mut().enumerate() {
-                            *b = b.wrapping_mul(31).wrapping_add(k as u8);
-                        }
-                    } else {
-                        // Perception-like: dense floating point.
-                        for k in 0..200_000 {
-                            x = (x * 1.000001 + k as f64).sqrt();
-                        }
-                    }
-                    std::hint::black_box((&buf, x));
-                }
-            })
-        })
-        .collect()
 }
 
 /// Wake lateness of the controller's periodic loop over `ticks` ticks.
@@ -232,31 +203,28 @@ const ROUNDS: usize = 6;
 /// hitl's loop and cyclictest, interleaved in [`ROUNDS`] rounds (each `seconds / ROUNDS`).
 fn measure_side_by_side(opts: &LoopBenchOptions) -> (Value, Value) {
     let ticks = ((opts.seconds * opts.rate_hz) / ROUNDS as f64).round().max(1.0) as usize;
-    let stop = Arc::new(AtomicBool::new(false));
-    let load = if opts.load { spawn_load(&stop) } else { Vec::new() };
-    let mut hitl = LoopSample { late_ns: Vec::new(), overruns: 0, report: Default::default() };
-    let mut floor: Result<Histogram, String> = Ok(Histogram::default());
-    for round in 0..ROUNDS {
-        let cyclictest = |floor: &mut Result<Histogram, String>| {
-            if let Ok(f) = floor {
-                match sample_cyclictest(opts, ticks) {
-                    Ok(h) => f.merge(h),
-                    Err(e) => *floor = Err(e),
+    let (hitl, floor) = under_load(opts.load, || {
+        let mut hitl = LoopSample { late_ns: Vec::new(), overruns: 0, report: Default::default() };
+        let mut floor: Result<Histogram, String> = Ok(Histogram::default());
+        for round in 0..ROUNDS {
+            let cyclictest = |floor: &mut Result<Histogram, String>| {
+                if let Ok(f) = floor {
+                    match sample_cyclictest(opts, ticks) {
+                        Ok(h) => f.merge(h),
+                        Err(e) => *floor = Err(e),
+                    }
                 }
+            };
+            if round % 2 == 1 {
+                cyclictest(&mut floor);
             }
-        };
-        if round % 2 == 1 {
-            cyclictest(&mut floor);
+            hitl.merge(sample_rust(opts, ticks));
+            if round % 2 == 0 {
+                cyclictest(&mut floor);
+            }
         }
-        hitl.merge(sample_rust(opts, ticks));
-        if round % 2 == 0 {
-            cyclictest(&mut floor);
-        }
-    }
-    stop.store(true, Ordering::Relaxed);
-    for t in load {
-        let _ = t.join();
-    }
+        (hitl, floor)
+    });
     let floor = match floor {
         Ok(h) => h.to_json().unwrap_or_else(|| json!({ "error": "cyclictest counted nothing" })),
         Err(e) => json!({ "error": e }),
@@ -274,17 +242,13 @@ fn floor_ratio(hitl: &Value, cyclictest: &Value, key: &str) -> Option<f64> {
 /// the absolute schedule the controller keeps.
 fn measure_python(opts: &LoopBenchOptions, python: &str) -> Value {
     let script = concat!(env!("CARGO_MANIFEST_DIR"), "/scripts/bench_loop.py");
-    let stop = Arc::new(AtomicBool::new(false));
-    let load = if opts.load { spawn_load(&stop) } else { Vec::new() };
-    let out = Command::new(python)
-        .arg(script)
-        .arg(opts.seconds.to_string())
-        .arg(opts.rate_hz.to_string())
-        .output();
-    stop.store(true, Ordering::Relaxed);
-    for t in load {
-        let _ = t.join();
-    }
+    let out = under_load(opts.load, || {
+        Command::new(python)
+            .arg(script)
+            .arg(opts.seconds.to_string())
+            .arg(opts.rate_hz.to_string())
+            .output()
+    });
     match out {
         Ok(o) if o.status.success() => serde_json::from_slice(&o.stdout)
             .unwrap_or_else(|e| json!({ "error": format!("bad output from {script}: {e}") })),

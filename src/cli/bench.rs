@@ -126,7 +126,12 @@ pub fn run(args: BenchArgs) -> u8 {
             }
         }
         #[cfg(feature = "stub")]
-        Which::Render => hitl_sim_stub::camera::bench_render(args.load),
+        Which::Render => {
+            let load = |f: &mut dyn FnMut()| crate::bench::load::under_load(true, f);
+            hitl_sim_stub::camera::bench_render(
+                args.load.then_some(&load as hitl_sim_stub::camera::bench::UnderLoad<'_>),
+            )
+        }
         #[cfg(not(feature = "stub"))]
         Which::Protocol | Which::Render => {
             crate::errln!("hitl bench: this build has no stub");

@@ -12,8 +12,6 @@ use hitl_hal::{CaptureRequest, Clock, Intrinsics, Joints, MonotonicClock, RgbdCa
 use hitl_trajectories::kinematics::{camera_pose, first_joint_beyond_limits};
 use hitl_trajectories::lab::LabConfig;
 use serde_json::json;
-use std::sync::atomic::{AtomicBool, Ordering};
-use std::sync::Arc;
 use std::time::{Duration, Instant};
 
 /// A pose of the arm, in the vertical plane through the base and the target (joints 2, 4 and 6
@@ -82,33 +80,6 @@ fn frames_per_second(mut render: impl FnMut() -> bool, seconds: f64) -> Option<f
     Some(f64::from(frames) / start.elapsed().as_secs_f64())
 }
 
-/// Busy threads, one per core, until `stop`: half stream through a frame-sized buffer (as the
-/// recorder does), half do dense floating point (as perception does).
-fn spawn_load(stop: &Arc<AtomicBool>) -> Vec<std::thread::JoinHandle<()>> {
-    let cores = std::thread::available_parallelism().map_or(2, |n| n.get());
-    (0..cores)
-        .map(|i| {
-            let stop = Arc::clone(stop);
-            std::thread::spawn(move || {
-                let mut buf = vec![0u8; 8 << 20];
-                let mut x = 1.0f64;
-                while !stop.load(Ordering::Relaxed) {
-                    if i % 2 == 0 {
-                        for (k, b) in buf.iter_mut().enumerate() {
-                            *b = b.wrapping_mul(31).wrapping_add(k as u8);
-                        }
-                    } else {
-                        for k in 0..200_000 {
-                            x = (x * 1.000001 + f64::from(k)).sqrt();
-                        }
-                    }
-                    std::hint::black_box((&buf, x));
-                }
-            })
-        })
-        .collect()
-}
-
 /// The sizes the benchmark renders, with their intrinsics.
 fn sizes() -> [(&'static str, Intrinsics); 3] {
     [
@@ -147,9 +118,13 @@ fn figures(gl: &mut Option<GlRenderer>, ray: &mut Renderer, q: &Joints) -> serde
     serde_json::Value::Object(out)
 }
 
-/// Run the benchmark on the default lab and return its figures; `load` adds a run with every
-/// core busy.
-pub fn bench_render(load: bool) -> serde_json::Value {
+/// Runs the closure it is handed with every core busy (the caller's load generator).
+pub type UnderLoad<'a> = &'a dyn Fn(&mut dyn FnMut());
+
+/// Run the benchmark on the default lab and return its figures. `under_load`, when given, runs
+/// the closure it is handed with every core busy (the controller's one load generator, so the
+/// figures mean what its other benchmarks' "under load" mean); the figures then have a loaded row.
+pub fn bench_render(under_load: Option<UnderLoad<'_>>) -> serde_json::Value {
     let lab = LabConfig::default();
     let model = match LabModel::new(&lab, None) {
         Ok(m) => m,
@@ -165,14 +140,9 @@ pub fn bench_render(load: bool) -> serde_json::Value {
         Err(e) => (None, Some(e.to_string())),
     };
     let idle = figures(&mut gl, &mut renderer, &q);
-    let loaded = load.then(|| {
-        let stop = Arc::new(AtomicBool::new(false));
-        let threads = spawn_load(&stop);
-        let f = figures(&mut gl, &mut renderer, &q);
-        stop.store(true, Ordering::Relaxed);
-        for t in threads {
-            let _ = t.join();
-        }
+    let loaded = under_load.map(|run| {
+        let mut f = serde_json::Value::Null;
+        run(&mut || f = figures(&mut gl, &mut renderer, &q));
         f
     });
     drop(gl);
