@@ -3,60 +3,25 @@
 //! colour lit rather than flat, the light level obeyed, and frames through the threaded camera.
 //! Small images only.
 
+mod cube_lab;
+
+use cube_lab::{cube_lab, HEIGHT, SIDE};
 use hitl_hal::Intrinsics;
 use hitl_sim_stub::camera::bench::look_at_target;
 use hitl_sim_stub::camera::{
     capture_with, render_capture, FrameNoise, GlRenderer, Image, Preset, Renderer,
 };
-use hitl_sim_stub::mjcf::TargetModel;
 use hitl_sim_stub::mujoco_plant::LabModel;
 use hitl_trajectories::lab::LabConfig;
 use nalgebra::{Isometry3, Point3, Translation3, UnitQuaternion, Vector3};
 
-const SIDE: f64 = 0.08;
-const HEIGHT: f64 = 0.3;
-
-fn cube() -> TargetModel {
-    let v: Vec<[f32; 3]> = (0..8)
-        .map(|i| {
-            [
-                (i & 1) as f32 * 2.0 - 1.0,
-                ((i >> 1) & 1) as f32 * 2.0 - 1.0,
-                ((i >> 2) & 1) as f32 * 2.0 - 1.0,
-            ]
-        })
-        .collect();
-    let f = vec![
-        [0, 2, 1],
-        [1, 2, 3],
-        [4, 5, 6],
-        [5, 7, 6],
-        [0, 1, 4],
-        [1, 5, 4],
-        [2, 6, 3],
-        [3, 6, 7],
-        [0, 4, 2],
-        [2, 4, 6],
-        [1, 3, 5],
-        [3, 7, 5],
-    ];
-    TargetModel { mesh: Some((v, f)), greatest_dimension_m: SIDE }
-}
-
-/// Both renderers on the default lab with a cube target, and a camera HEIGHT above the cube's
-/// centre looking straight down (OpenCV axes: x along lab x, y along lab -y).
+/// Both renderers on the cube lab ([`cube_lab`]).
 fn cube_scene(w: u32, h: u32) -> (GlRenderer, Renderer, Isometry3<f64>, Point3<f64>) {
-    let lab = LabConfig::default();
-    let model = LabModel::generated(&lab, &cube()).expect("cube lab");
+    let (model, camera, centre) = cube_lab();
     let mut ray = Renderer::new(model.clone()).expect("ray cast");
     ray.set_joints(&[0.0; 7]);
     let mut gl = GlRenderer::new(model, w, h).expect("MuJoCo renderer (EGL)");
     gl.set_joints(&[0.0; 7]);
-    let centre = lab.base_in_lab() * lab.target_position_base();
-    let camera = Isometry3::from_parts(
-        Translation3::from(centre.coords + Vector3::z() * HEIGHT),
-        UnitQuaternion::from_axis_angle(&Vector3::x_axis(), std::f64::consts::PI),
-    );
     (gl, ray, camera, centre)
 }
 
