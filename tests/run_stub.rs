@@ -51,6 +51,13 @@ fn run_with(extra: &[&str]) -> Run {
 }
 
 fn run_with_camera(camera: &str, extra: &[&str]) -> Run {
+    let silences = extra.iter().any(|a| a.starts_with("stall-"));
+    run_in_lab(camera, Some(if silences { SILENCE_LAB } else { SHARED_VM_LAB }), extra)
+}
+
+/// Plays the test sweep with a recording, `camera`, the simulated light and `lab` (the default
+/// lab when `None`), plus `extra` flags.
+fn run_in_lab(camera: &str, lab: Option<&str>, extra: &[&str]) -> Run {
     let dir = tempfile::tempdir().expect("tempdir");
     let traj = numpy_trajectory(dir.path());
     let mcap = dir.path().join("run.mcap");
@@ -65,8 +72,9 @@ fn run_with_camera(camera: &str, extra: &[&str]) -> Run {
         "sim",
         "--plain",
     ];
-    let silences = extra.iter().any(|a| a.starts_with("stall-"));
-    args.extend_from_slice(&["--config", if silences { SILENCE_LAB } else { SHARED_VM_LAB }]);
+    if let Some(lab) = lab {
+        args.extend_from_slice(&["--config", lab]);
+    }
     args.extend_from_slice(extra);
     let out = hitl(&args);
     Run { out, mcap, _dir: dir, traj }
@@ -219,30 +227,11 @@ fn an_arm_that_stops_answering_setpoints_holds_and_exits_5() {
 /// default lab when `None`); returns exit code, everything printed and the recorded events
 /// (kind, detail).
 fn run_fault(fault: &str, config: Option<&str>) -> (i32, String, Vec<(String, String)>) {
-    let dir = tempfile::tempdir().expect("tempdir");
-    let traj = numpy_trajectory(dir.path());
-    let mcap = dir.path().join("run.mcap");
-    let mut args = vec![
-        "run",
-        traj.to_str().expect("utf-8"),
-        "--record",
-        mcap.to_str().expect("utf-8"),
-        "--camera",
-        "none",
-        "--light",
-        "sim",
-        "--plain",
-        "--stub-fault",
-        fault,
-    ];
-    if let Some(c) = config {
-        args.extend_from_slice(&["--config", c]);
-    }
-    let out = hitl(&args);
-    let rec = read_recording(&mcap).expect("the recording stays readable");
+    let run = run_in_lab("none", config, &["--stub-fault", fault]);
+    let rec = read_recording(&run.mcap).expect("the recording stays readable");
     (
-        code(&out),
-        text(&out),
+        code(&run.out),
+        text(&run.out),
         rec.events.iter().map(|e| (e.kind.clone(), e.detail.clone())).collect(),
     )
 }
