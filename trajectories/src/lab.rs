@@ -35,6 +35,14 @@ pub struct LabConfig {
     pub margins: Margins,
     pub limits: JointLimits,
     pub interlocks: Interlocks,
+    pub scene: SceneConfig,
+    /// The calibration board on the target's mount (`hitl calibrate`); absent: none mounted.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub board: Option<BoardPlacement>,
+    /// Where the camera mount and target pose came from: absent means nominal (hand-measured);
+    /// `hitl calibrate` writes this block with the values it recovered.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub calibration: Option<CalibrationProvenance>,
 }
 
 /// The enclosure box in the lab frame, from the origin to `size_m`.
@@ -209,6 +217,53 @@ impl Default for JointLimits {
             approach_acceleration_rad_s2: 0.8,
             approach_jerk_rad_s3: 8.0,
         }
+    }
+}
+
+/// What the stub's simulated camera shows (docs/stub-scene.md). Nothing here changes what the
+/// preflight or the stub's physics check: both scenes have the same collision geometry.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize, Default)]
+#[serde(default, deny_unknown_fields)]
+pub struct SceneConfig {
+    /// `lab` (default: the enclosure's twin, lit by the studio light) or `orbit` (black sky, the
+    /// Earth, a directional Sun that follows the trajectory's Sun phase). `hitl run
+    /// --scene-kind` overrides it.
+    pub kind: SceneKind,
+}
+
+/// The two looks of the stub's scene.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize, Default)]
+#[serde(rename_all = "lowercase")]
+pub enum SceneKind {
+    /// The enclosure's twin: curtains, tripod, the printed target, the studio light as a spot.
+    #[default]
+    Lab,
+    /// The paper's SITL look: black background, the Earth, a directional Sun, no stand drawn.
+    Orbit,
+}
+
+/// Why a scene kind was refused.
+#[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
+#[error("{0:?} is not a scene kind: expected lab or orbit")]
+pub struct SceneKindError(pub String);
+
+impl std::str::FromStr for SceneKind {
+    type Err = SceneKindError;
+    fn from_str(s: &str) -> Result<Self, Self::Err> {
+        match s {
+            "lab" => Ok(SceneKind::Lab),
+            "orbit" => Ok(SceneKind::Orbit),
+            other => Err(SceneKindError(other.to_string())),
+        }
+    }
+}
+
+impl std::fmt::Display for SceneKind {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str(match self {
+            SceneKind::Lab => "lab",
+            SceneKind::Orbit => "orbit",
+        })
     }
 }
 
@@ -411,6 +466,90 @@ impl LabConfig {
     }
 }
 
+/// An AprilGrid calibration board (AprilTags in rows and columns) and where it is fixed on the
+/// target's mount. Board frame: origin at the outer top-left corner of the first tag's black
+/// square, x along the rows (to the right as printed), y down the columns, z into the board.
+/// Tag `first_id + row * cols + col` is at (row, col). `Default` is the repository's board
+/// (calib/boards/aprilgrid-6x6.toml) 9 cm in front of the target centre, facing the arm and
+/// tilted 45 deg up.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct BoardPlacement {
+    /// Tag family; `tag36h11` is the one hitl detects.
+    pub family: String,
+    /// Tag rows and columns.
+    pub rows: u32,
+    pub cols: u32,
+    /// Side of one tag's black square, metres (as printed and measured).
+    pub tag_size_m: f64,
+    /// White gap between neighbouring tags, metres.
+    pub tag_spacing_m: f64,
+    /// Id of the tag at row 0, column 0.
+    pub first_id: u32,
+    /// Board-frame origin in the target frame, metres.
+    pub position_target_m: [f64; 3],
+    /// Board axes in the target frame as roll, pitch, yaw (degrees, z-y-x).
+    pub rpy_deg: [f64; 3],
+}
+
+impl Default for BoardPlacement {
+    fn default() -> Self {
+        Self {
+            family: "tag36h11".into(),
+            rows: 6,
+            cols: 6,
+            tag_size_m: 0.03,
+            tag_spacing_m: 0.009,
+            first_id: 0,
+            position_target_m: [-0.01045049, 0.1125, 0.07954951],
+            rpy_deg: [-135.0, 0.0, -90.0],
+        }
+    }
+}
+
+impl BoardPlacement {
+    /// The board frame in the target frame.
+    pub fn board_in_target(&self) -> Isometry3<f64> {
+        let p = self.position_target_m;
+        Isometry3::from_parts(Translation3::new(p[0], p[1], p[2]), rpy(&self.rpy_deg))
+    }
+}
+
+/// Provenance of a calibrated camera mount and target pose (written by `hitl calibrate`).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize, Default)]
+#[serde(default, deny_unknown_fields)]
+pub struct CalibrationProvenance {
+    /// When it was solved (UTC, RFC 3339).
+    pub date: String,
+    /// How: solver and refinement.
+    pub method: String,
+    /// The board it saw (family, grid, tag size).
+    pub board: String,
+    /// Views used in the solution.
+    pub views: u32,
+    /// Reprojection error over all corners, RMS, pixels.
+    pub rms_px: f64,
+    /// Per-view RMS reprojection error, pixels, in view order.
+    pub view_rms_px: Vec<f64>,
+    /// One-sigma uncertainty of the camera mount: translation (mm), rotation (deg).
+    pub camera_sigma_mm: f64,
+    pub camera_sigma_deg: f64,
+    /// One-sigma uncertainty of the target pose: translation (mm), rotation (deg).
+    pub target_sigma_mm: f64,
+    pub target_sigma_deg: f64,
+}
+
+impl LabConfig {
+    /// The name of the calibration the ground truth comes from: `nominal`, or
+    /// `calibrated <date> (<views> views, <rms> px RMS)`.
+    pub fn calibration_name(&self) -> String {
+        match &self.calibration {
+            None => "nominal".into(),
+            Some(c) => format!("calibrated {} ({} views, {:.3} px RMS)", c.date, c.views, c.rms_px),
+        }
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -450,6 +589,21 @@ mod tests {
         assert_eq!(LabConfig::default().arm.joint_table, JointTable::Xarm7Current);
         let c = LabConfig::from_toml("[arm]\njoint_table = \"xarm7-legacy\"\n").expect("legacy");
         assert_eq!(c.arm.joint_table, JointTable::Xarm7Legacy);
+    }
+
+    #[test]
+    fn the_scene_kind_defaults_to_lab_and_refuses_unknown_keys() {
+        assert_eq!(LabConfig::default().scene.kind, SceneKind::Lab);
+        let c = LabConfig::from_toml("[scene]\nkind = \"orbit\"\n").expect("orbit");
+        assert_eq!(c.scene.kind, SceneKind::Orbit);
+        assert_eq!(LabConfig::from_toml(&c.to_toml()).expect("round trip"), c);
+        let e = LabConfig::from_toml("[scene]\nkind = \"space\"\n").expect_err("refused");
+        assert!(e.to_string().contains("space"), "{e}");
+        let e = LabConfig::from_toml("[scene]\nlook = \"lab\"\n").expect_err("refused");
+        assert!(e.to_string().contains("look"), "{e}");
+        assert_eq!("orbit".parse::<SceneKind>(), Ok(SceneKind::Orbit));
+        assert!("Orbit".parse::<SceneKind>().is_err());
+        assert_eq!(SceneKind::Orbit.to_string(), "orbit");
     }
 
     #[test]
