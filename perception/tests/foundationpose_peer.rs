@@ -34,6 +34,7 @@ fn the_peers_python_tests_pass() {
     let out = Command::new(python())
         .args(["-m", "unittest", "discover", "-s", "tests", "-t", "."])
         .current_dir(peer_dir())
+        .env("PYTHONDONTWRITEBYTECODE", "1")
         .output()
         .unwrap();
     let text = String::from_utf8_lossy(&out.stderr);
@@ -71,6 +72,7 @@ impl Peer {
             .current_dir(peer_dir())
             .env("HITL_FP_STAND_IN_LOG", &calls)
             .env("TMPDIR", dir.path())
+            .env("PYTHONDONTWRITEBYTECODE", "1")
             .stdin(Stdio::null())
             .stdout(Stdio::null())
             .stderr(std::fs::File::create(&log).unwrap())
