@@ -38,6 +38,8 @@ enum Command {
     Bench(cli::bench::BenchArgs),
     /// Commission devices: list ports and cameras, check each named device answers. Moves nothing.
     Probe(cli::probe::ProbeArgs),
+    /// SITL campaigns from a manifest: run (resumable, N at a time), collect, slurm, list.
+    Campaign(cli::campaign::CampaignArgs),
 }
 
 fn main() -> ExitCode {
@@ -59,6 +61,7 @@ fn main() -> ExitCode {
         Command::Eval(args) => cli::eval::run(args),
         Command::Bench(args) => cli::bench::run(args),
         Command::Probe(args) => cli::probe::run(args),
+        Command::Campaign(args) => cli::campaign::run(args),
     };
     ExitCode::from(code)
 }

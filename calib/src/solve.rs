@@ -9,7 +9,7 @@
 //! 2. Shah's closed form for `A_i X = Z B_i` (`B_i` = board -> camera, the inverse of step 1's
 //!    pose): the rotations from the null vector of the stacked Kronecker system
 //!    `(I (x) R_A) vec(R_X) = (R_B^T (x) I) vec(R_Z)`, each projected onto SO(3); then the
-//!    translations by linear least squares of `R_A t_X - t_Z = R_Z t_B - t_A` ([`shah`]).
+//!    translations by linear least squares in each view's camera frame ([`shah`]).
 //! 3. A joint Levenberg-Marquardt refinement of `X` and `Z` (12 parameters, local increments
 //!    `X exp(d)`) on every corner's reprojection error through `X^-1 A_i^-1 Z`; written here on
 //!    nalgebra (the `levenberg-marquardt` crate is built on an older nalgebra than the
@@ -260,19 +260,26 @@ pub fn shah(
     }
     let rx = nearest_rotation(&(rx / alpha));
     let rz = nearest_rotation(&(rz / alpha));
-    // Translations: R_A t_X - t_Z = R_Z t_B - t_A.
+    // Translations, written in each view's camera frame (as OpenCV writes Shah's method), with
+    // C_i = B_i^-1 (the board's pose in the camera), Z' = Z^-1, X' = X^-1:
+    // C_i Z' = X' A_i^-1, so R_Ci t_Z' - t_X' = R_X' t_(A_i^-1) - t_Ci.
+    let rxi = rx.transpose();
     let mut lhs = DMatrix::<f64>::zeros(3 * n, 6);
     let mut rhs = DVector::<f64>::zeros(3 * n);
     for (i, (ai, bi)) in a.iter().zip(b).enumerate() {
-        let ra = ai.rotation.to_rotation_matrix().into_inner();
-        lhs.view_mut((3 * i, 0), (3, 3)).copy_from(&ra);
+        let c = bi.inverse();
+        let rc = c.rotation.to_rotation_matrix().into_inner();
+        lhs.view_mut((3 * i, 0), (3, 3)).copy_from(&rc);
         lhs.view_mut((3 * i, 3), (3, 3)).copy_from(&(-Matrix3::identity()));
-        let r = rz * bi.translation.vector - ai.translation.vector;
+        let r = rxi * ai.inverse().translation.vector - c.translation.vector;
         rhs.rows_mut(3 * i, 3).copy_from(&r);
     }
     let sol = lhs.svd(true, true).solve(&rhs, 1e-12).ok()?;
-    let tx = Vector3::new(sol[0], sol[1], sol[2]);
-    let tz = Vector3::new(sol[3], sol[4], sol[5]);
+    let tzi = Vector3::new(sol[0], sol[1], sol[2]);
+    let txi = Vector3::new(sol[3], sol[4], sol[5]);
+    // t_X = -R_X t_X', t_Z = -R_Z t_Z'.
+    let tx = -(rx * txi);
+    let tz = -(rz * tzi);
     Some((iso(&rx, &tx), iso(&rz, &tz)))
 }
 

@@ -1,6 +1,7 @@
 //! One module per subcommand: its flags (documented for `--help`) and what it does.
 
 pub mod bench;
+pub mod campaign;
 pub mod check;
 pub mod eval;
 pub mod plan;

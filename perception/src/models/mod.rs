@@ -2,6 +2,7 @@
 //! class of the paper) and the user's OBJ/STL files, all in the target's body frame (centred on
 //! the bounding-box midpoint, metres).
 
+pub mod decimate;
 mod load;
 pub mod mesh;
 mod procedural;
