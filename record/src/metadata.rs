@@ -2,6 +2,9 @@
 
 use std::collections::BTreeMap;
 
+/// The `run` metadata key naming the calibration the ground truth came from.
+pub const CALIBRATION_KEY: &str = "calibration";
+
 /// The `run` metadata record. Strings are written as given; `extra` adds any other keys.
 #[derive(Debug, Clone, Default, PartialEq)]
 pub struct RunMetadata {
@@ -21,6 +24,9 @@ pub struct RunMetadata {
     pub extra: BTreeMap<String, String>,
     /// The trajectory's Sun phase schedule, when it has one.
     pub sun_phase: Option<SunPhaseTrack>,
+    /// Where the ground truth's camera mount and target pose came from: `nominal` (hand-measured,
+    /// also when empty) or the calibration's name (`hitl calibrate`'s provenance).
+    pub calibration: String,
 }
 
 /// The trajectory's oriented Sun phase angle at its waypoints (`t` and `sun_phase_deg` of the
@@ -57,6 +63,8 @@ impl RunMetadata {
         m.insert("trajectory_sha256".into(), self.trajectory_sha256.clone());
         m.insert("trajectory_meta".into(), self.trajectory_meta.clone());
         m.insert("lab_config".into(), self.lab_config.clone());
+        let calibration = if self.calibration.is_empty() { "nominal" } else { &self.calibration };
+        m.insert(CALIBRATION_KEY.into(), calibration.to_string());
         m.insert("versions".into(), serde_json::to_string(&self.versions).unwrap_or_default());
         if let Some(s) = self.scale {
             m.insert("scale".into(), s.to_string());

@@ -9,6 +9,7 @@
 //! - [`server`], [`faults`]: the xArm protocol server with a real box's state machine, and fault
 //!   injection.
 
+pub mod board;
 pub mod camera;
 pub mod faults;
 pub mod mjcf;

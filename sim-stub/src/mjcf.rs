@@ -270,6 +270,7 @@ pub fn lab_mjcf(lab: &LabConfig, target: &TargetModel) -> Result<String, StubSce
     write_enclosure(&mut x, lab);
     write_tripod_and_light(&mut x, lab);
     write_target(&mut x, lab, target);
+    crate::board::write_board(&mut x, lab).map_err(StubSceneError::Lab)?;
     write_arm(&mut x, lab);
     let _ = writeln!(x, "  </worldbody>");
     let _ = writeln!(x, "  <actuator>");

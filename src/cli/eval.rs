@@ -77,6 +77,7 @@ pub fn run(args: EvalArgs) -> u8 {
                         g("backend_resets")
                     );
                 }
+                crate::outln!("ground truth from: {}", g("calibration").as_str().unwrap_or("nominal"));
                 crate::outln!(
                     "frames {} (failures {}), scale {}\n\
                      e_t real m: mean {} median {} std {}\n\
@@ -192,6 +193,11 @@ fn eval(args: &EvalArgs) -> Result<serde_json::Value, String> {
     }
     if let Some(obj) = v.as_object_mut() {
         obj.extend(extra);
+        // The calibration the ground truth came from (recordings before it existed: nominal).
+        let calibration = run_meta
+            .and_then(|m| m.get(hitl_record::metadata::CALIBRATION_KEY))
+            .map_or("nominal", |c| c.as_str());
+        obj.insert("calibration".into(), serde_json::json!(calibration));
         obj.insert(
             "recording_complete".into(),
             serde_json::json!(rec.end.as_ref().is_some_and(|e| e.complete)),

@@ -22,6 +22,9 @@ pub fn run(args: ReportArgs) -> u8 {
     let dir = args.out.clone().unwrap_or_else(|| default_out_dir(&args.recording));
     match write_report(&args.recording, Some(&dir)) {
         Ok(r) => {
+            if let Some(w) = nominal_hitl_warning(&args.recording) {
+                crate::errln!("hitl report: warning: {w}");
+            }
             if args.json {
                 match serde_json::to_string(&r.summary) {
                     Ok(s) => crate::outln!("{s}"),
@@ -51,4 +54,32 @@ pub fn run(args: ReportArgs) -> u8 {
             exit::BAD_INPUT
         }
     }
+}
+
+/// A HITL (real-arm) run whose ground truth used the nominal camera mount and target pose: its
+/// pose errors include the mount's and the tripod's placement errors (docs/calibration.md).
+fn nominal_hitl_warning(path: &std::path::Path) -> Option<String> {
+    let mut run = None;
+    hitl_record::reader::visit(
+        path,
+        |_| std::ops::ControlFlow::Continue(()),
+        |name, map| {
+            if name == hitl_record::topics::META_RUN {
+                run = Some(map.clone());
+            }
+        },
+    )
+    .ok()?;
+    let run = run?;
+    let config: serde_json::Value = serde_json::from_str(run.get("config")?).ok()?;
+    let arm = config.get("arm")?.as_str()?;
+    let calibration =
+        run.get(hitl_record::metadata::CALIBRATION_KEY).map_or("nominal", |c| c.as_str());
+    (!arm.starts_with("stub") && calibration == "nominal").then(|| {
+        format!(
+            "this HITL run (arm {arm}) took its ground truth from the nominal camera mount and \
+             target pose: run hitl calibrate and record with the calibrated configuration for \
+             quantitative errors"
+        )
+    })
 }

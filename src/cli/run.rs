@@ -69,6 +69,10 @@ pub struct RunArgs {
     /// Target model: asymmetric, one-plane, two-planes (built in) or an OBJ/STL file.
     #[arg(long, default_value = "asymmetric", value_name = "NAME|FILE")]
     pub target_model: String,
+    /// SITL: the lab the embedded stub simulates (camera mount, target pose, board), while the
+    /// controller keeps --config (how a calibration is tested against a hidden truth).
+    #[arg(long, value_name = "TRUE.toml")]
+    pub stub_config: Option<PathBuf>,
     /// Inject a stub fault at a time into the run (repeatable): drop-connection, stall-reports,
     /// stall-replies, arm-error, deviation, estop, door-open; e.g. `--stub-fault estop@2.5`.
     #[arg(long = "stub-fault", value_name = "KIND@SECONDS")]
@@ -172,6 +176,20 @@ pub fn run(args: RunArgs, record: bool) -> u8 {
         (None, true) => Some(default_record_path()),
         (None, false) => None,
     };
+    let stub_lab = match &args.stub_config {
+        None => None,
+        Some(_) if args.arm.is_some() => {
+            crate::errln!("hitl run: --stub-config only applies to the embedded stub, not to --arm");
+            return exit::BAD_INPUT;
+        }
+        Some(path) => match LabConfig::load(path) {
+            Ok(lab) => Some(lab),
+            Err(e) => {
+                crate::errln!("hitl run: --stub-config: {e}");
+                return exit::BAD_INPUT;
+            }
+        },
+    };
     let request = RunRequest {
         trajectory: args.trajectory,
         waypoint_rate_hz: args.waypoint_rate,
@@ -188,6 +206,7 @@ pub fn run(args: RunArgs, record: bool) -> u8 {
         camera_preset: args.camera_preset,
         camera_size: args.camera_size,
         target_model: args.target_model,
+        stub_lab,
         rt: RtOptions {
             fifo_priority: (args.rt_priority > 0).then_some(args.rt_priority),
             lock_memory: true,

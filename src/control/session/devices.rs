@@ -81,6 +81,7 @@ pub(super) fn start_recorder(
         trajectory_sha256: sha.iter().map(|b| format!("{b:02x}")).collect(),
         trajectory_meta: traj.meta.clone().unwrap_or_default(),
         lab_config: req.lab.to_toml(),
+        calibration: req.lab.calibration_name(),
         versions,
         scale: Some(scale),
         extra: [

@@ -110,6 +110,9 @@ pub struct RunRequest {
     pub camera_size: Option<(u32, u32)>,
     /// Target model: a built-in name (asymmetric, one-plane, two-planes) or an OBJ/STL path.
     pub target_model: String,
+    /// SITL: the lab the embedded stub simulates (`--stub-config`), when it is not the one the
+    /// controller believes (`lab`): the truth a calibration must recover.
+    pub stub_lab: Option<LabConfig>,
     pub rt: RtOptions,
     pub plain_progress: bool,
 }
@@ -328,7 +331,12 @@ fn start_arm_target(req: &RunRequest, scene: &TargetScene) -> Result<ArmTargetLi
     match &req.target {
         #[cfg(feature = "stub")]
         ArmTarget::Stub { faults } => {
-            let stub = start_stub(faults, &req.lab, &scene.model, scene.scale)?;
+            let stub = start_stub(
+                faults,
+                req.stub_lab.as_ref().unwrap_or(&req.lab),
+                &scene.model,
+                scene.scale,
+            )?;
             let cmd_addr = stub.cmd_addr();
             Ok(ArmTargetLink { cmd_addr, report_host: cmd_addr.ip(), stub: Some(stub) })
         }
