@@ -1,13 +1,16 @@
 //! Target models: a triangle [`Mesh`], the project's procedural spacecraft (one per symmetry
 //! class of the paper) and the user's OBJ/STL files, all in the target's body frame (centred on
-//! the bounding-box midpoint, metres).
+//! the bounding-box midpoint, metres). Each also has parts with materials ([`look`]) for the
+//! simulated camera.
 
 pub mod decimate;
 mod load;
+pub mod look;
 pub mod mesh;
 mod procedural;
 
-pub use load::load_mesh_file;
+pub use load::{load_mesh_file, load_model_file};
+pub use look::{Material, Part, Texture};
 pub use mesh::Mesh;
 pub use procedural::{builtin, BUILTIN_NAMES};
 
@@ -31,13 +34,18 @@ pub enum SymmetryClass {
 /// The real-scale greatest dimension every target is normalised to (paper, RQ3): 2 m.
 pub const GREATEST_DIMENSION_M: f64 = 2.0;
 
-/// A target: its mesh at real scale and what is known about its symmetry.
+/// A target: its mesh at real scale, what is known about its symmetry, and how it looks.
 #[derive(Debug, Clone, PartialEq)]
 pub struct TargetModel {
     pub name: String,
     pub symmetry: SymmetryClass,
-    /// Body-frame mesh in real metres, centred on its bounding-box midpoint.
+    /// Body-frame mesh in real metres, centred on its bounding-box midpoint: what the
+    /// estimators register against.
     pub mesh: Mesh,
+    /// The same surface as parts with materials, same frame and units: what the simulated
+    /// camera draws. Every triangle of `mesh` is in one part (an OBJ's are the same triangles;
+    /// a built-in's boxes have their corners repeated per face for flat shading).
+    pub parts: Vec<Part>,
 }
 
 impl TargetModel {
@@ -57,8 +65,12 @@ impl TargetModel {
                 ),
             });
         }
-        let mesh =
-            load_mesh_file(path)?.centered().scaled_to_greatest_dimension(GREATEST_DIMENSION_M)?;
+        let (raw, parts) = load_model_file(path)?;
+        let (lo, hi) = raw.bounds();
+        let centre = [0.5 * (lo[0] + hi[0]), 0.5 * (lo[1] + hi[1]), 0.5 * (lo[2] + hi[2])];
+        let factor = GREATEST_DIMENSION_M / raw.greatest_dimension();
+        let mesh = raw.centered().scaled(factor)?;
+        let parts = parts.into_iter().map(|p| p.transformed(centre, factor)).collect();
         Ok(TargetModel {
             name: path
                 .file_stem()
@@ -66,6 +78,7 @@ impl TargetModel {
                 .unwrap_or_else(|| spec.to_string()),
             symmetry: SymmetryClass::Unknown,
             mesh,
+            parts,
         })
     }
 
