@@ -16,6 +16,7 @@ pub mod mjcf;
 pub mod mujoco_plant;
 pub mod plant;
 pub mod server;
+pub mod target_look;
 
 pub use faults::{Fault, FaultKind, SimInputs, SimInputsReader};
 pub use server::bench::{bench_protocol, BenchError, BenchOptions};

@@ -16,6 +16,10 @@
 //! on every arm body), as the box's own gravity compensation does.
 
 use crate::mujoco_plant::StubSceneError;
+use crate::target_look::{write_assets, write_target};
+pub use crate::target_look::{
+    TargetMaterial, TargetModel, TargetPart, TargetTexture, TriangleMesh,
+};
 use hitl_trajectories::kinematics::{self, CHAIN, DOF, LINK_RADII};
 use hitl_trajectories::lab::LabConfig;
 use nalgebra::{Isometry3, Point3, UnitQuaternion, Vector3};
@@ -66,72 +70,6 @@ pub fn servo_kp(j: usize) -> f64 {
 /// Velocity gain of joint `j`'s servo (critically damped at the nominal inertia), N m s/rad.
 pub fn servo_kv(j: usize) -> f64 {
     2.0 * SERVO_OMEGA * NOMINAL_INERTIA[j]
-}
-
-/// Vertices and triangles (indices into the vertices) of a mesh.
-pub type TriangleMesh = (Vec<[f32; 3]>, Vec<[u32; 3]>);
-
-/// The target spacecraft: a triangle mesh if one is given, else a primitive composite (a bus box
-/// with two solar panels and an antenna dish). Either way it is scaled so that its greatest
-/// dimension (of its axis-aligned bounding box in the target frame) is `greatest_dimension_m`,
-/// and centred on the target frame.
-#[derive(Debug, Clone, PartialEq)]
-pub struct TargetModel {
-    /// Vertices (target frame, any unit) and triangles (indices into the vertices).
-    pub mesh: Option<TriangleMesh>,
-    /// Greatest dimension of the model in the lab, metres.
-    pub greatest_dimension_m: f64,
-}
-
-impl TargetModel {
-    /// The primitive spacecraft sized for `lab`: the printed model's size when configured, else
-    /// the diameter of the target's keep-out sphere (so it stays inside what preflight checks).
-    pub fn for_lab(lab: &LabConfig) -> Self {
-        let size = lab.target.model_size_m.unwrap_or(2.0 * lab.target.keepout_radius_m);
-        Self { mesh: None, greatest_dimension_m: size }
-    }
-
-    fn validate(&self) -> Result<(), StubSceneError> {
-        let bad = |m: String| Err(StubSceneError::Target(m));
-        if !(self.greatest_dimension_m > 0.0 && self.greatest_dimension_m.is_finite()) {
-            return bad(format!(
-                "greatest_dimension_m = {} must be positive",
-                self.greatest_dimension_m
-            ));
-        }
-        if let Some((v, f)) = &self.mesh {
-            if v.len() < 4 || f.len() < 4 {
-                return bad(format!(
-                    "mesh has {} vertices and {} triangles; a solid needs at least 4 of each",
-                    v.len(),
-                    f.len()
-                ));
-            }
-            if v.iter().flatten().any(|x| !x.is_finite()) {
-                return bad("mesh has a vertex that is not a finite number".into());
-            }
-            if let Some(t) = f.iter().find(|t| t.iter().any(|i| *i as usize >= v.len())) {
-                return bad(format!("mesh triangle {t:?} indexes past its {} vertices", v.len()));
-            }
-            let (lo, hi) = bounds(v);
-            if (0..3).all(|a| hi[a] - lo[a] <= 0.0) {
-                return bad("mesh has zero extent".into());
-            }
-        }
-        Ok(())
-    }
-}
-
-fn bounds(v: &[[f32; 3]]) -> ([f64; 3], [f64; 3]) {
-    let mut lo = [f64::INFINITY; 3];
-    let mut hi = [f64::NEG_INFINITY; 3];
-    for p in v {
-        for a in 0..3 {
-            lo[a] = lo[a].min(f64::from(p[a]));
-            hi[a] = hi[a].max(f64::from(p[a]));
-        }
-    }
-    (lo, hi)
 }
 
 /// Writes `v` as space-separated numbers (shortest representation that reads back exactly).
@@ -269,7 +207,7 @@ pub fn lab_mjcf(lab: &LabConfig, target: &TargetModel) -> Result<String, StubSce
     write_sun(&mut x, lab);
     write_enclosure(&mut x, lab);
     write_tripod_and_light(&mut x, lab);
-    write_target(&mut x, lab, target);
+    write_target(&mut x, &(lab.base_in_lab() * lab.target_in_base()), target);
     crate::board::write_board(&mut x, lab).map_err(StubSceneError::Lab)?;
     write_arm(&mut x, lab);
     let _ = writeln!(x, "  </worldbody>");
@@ -289,25 +227,6 @@ pub fn lab_mjcf(lab: &LabConfig, target: &TargetModel) -> Result<String, StubSce
     let _ = writeln!(x, "  </actuator>");
     let _ = writeln!(x, "</mujoco>");
     Ok(x)
-}
-
-fn write_assets(x: &mut String, target: &TargetModel) {
-    let Some((v, f)) = &target.mesh else { return };
-    let (lo, hi) = bounds(v);
-    let extent = (0..3).map(|a| hi[a] - lo[a]).fold(0.0, f64::max);
-    let scale = target.greatest_dimension_m / extent;
-    let centre = [(lo[0] + hi[0]) / 2.0, (lo[1] + hi[1]) / 2.0, (lo[2] + hi[2]) / 2.0];
-    let verts: Vec<f64> =
-        v.iter().flat_map(|p| (0..3).map(move |a| (f64::from(p[a]) - centre[a]) * scale)).collect();
-    let faces: Vec<String> = f.iter().flatten().map(|i| i.to_string()).collect();
-    let _ = writeln!(x, "  <asset>");
-    let _ = writeln!(
-        x,
-        "    <mesh name=\"target_mesh\" inertia=\"shell\" vertex=\"{}\" face=\"{}\"/>",
-        nums(&verts),
-        faces.join(" ")
-    );
-    let _ = writeln!(x, "  </asset>");
 }
 
 fn write_sun(x: &mut String, lab: &LabConfig) {
@@ -367,57 +286,6 @@ fn write_tripod_and_light(x: &mut String, lab: &LabConfig) {
             _ => {}
         }
     }
-}
-
-fn write_target(x: &mut String, lab: &LabConfig, target: &TargetModel) {
-    let pose = lab.base_in_lab() * lab.target_in_base();
-    let _ = writeln!(x, "    <body name=\"{TARGET_BODY}\" {}>", frame_attrs(&pose));
-    if target.mesh.is_some() {
-        let _ = writeln!(
-            x,
-            "      <geom name=\"target-mesh\" class=\"target\" type=\"mesh\" mesh=\"target_mesh\" rgba=\"0.8 0.8 0.8 1\"/>"
-        );
-    } else {
-        // Bus: a cube of 0.3 D; panels from the bus's +-y faces out to +-D/2; a dish on +z.
-        let d = target.greatest_dimension_m;
-        let bus = 0.15 * d;
-        let panel_len = (0.5 * d - bus) / 2.0;
-        let panel_y = bus + panel_len;
-        type Part = (&'static str, &'static str, [f64; 3], [f64; 3], &'static str);
-        let parts: [Part; 4] = [
-            ("target-bus", "box", [0.0, 0.0, 0.0], [bus, bus, bus], "0.85 0.65 0.25 1"),
-            (
-                "target-panel-y+",
-                "box",
-                [0.0, panel_y, 0.0],
-                [0.12 * d, panel_len, 0.005 * d],
-                "0.10 0.15 0.45 1",
-            ),
-            (
-                "target-panel-y-",
-                "box",
-                [0.0, -panel_y, 0.0],
-                [0.12 * d, panel_len, 0.005 * d],
-                "0.10 0.15 0.45 1",
-            ),
-            (
-                "target-dish",
-                "cylinder",
-                [0.0, 0.0, bus + 0.01 * d],
-                [0.08 * d, 0.01 * d, 0.0],
-                "0.9 0.9 0.9 1",
-            ),
-        ];
-        for (name, kind, p, s, rgba) in parts {
-            let size = if kind == "cylinder" { nums(&s[..2]) } else { nums(&s) };
-            let _ = writeln!(
-                x,
-                "      <geom name=\"{name}\" class=\"target\" type=\"{kind}\" pos=\"{}\" size=\"{size}\" rgba=\"{rgba}\"/>",
-                nums(&p)
-            );
-        }
-    }
-    let _ = writeln!(x, "    </body>");
 }
 
 fn write_arm(x: &mut String, lab: &LabConfig) {

@@ -79,22 +79,35 @@ fn bad_target_meshes_are_refused() {
     let cube: Vec<[f32; 3]> =
         (0..8).map(|i| [(i & 1) as f32, (i >> 1 & 1) as f32, (i >> 2 & 1) as f32]).collect();
     let tris = vec![[0, 1, 2], [1, 3, 2], [4, 6, 5], [5, 6, 7]];
-    let bad_index =
-        TargetModel { mesh: Some((cube.clone(), vec![[0, 1, 8]; 4])), greatest_dimension_m: 0.1 };
+    let bad_index = TargetModel {
+        mesh: Some((cube.clone(), vec![[0, 1, 8]; 4])),
+        greatest_dimension_m: 0.1,
+        parts: Vec::new(),
+    };
     let e = lab_mjcf(&lab, &bad_index).expect_err("index");
     assert!(e.to_string().contains("indexes past"), "{e}");
     let mut nan = cube.clone();
     nan[3][1] = f32::NAN;
-    let e =
-        lab_mjcf(&lab, &TargetModel { mesh: Some((nan, tris.clone())), greatest_dimension_m: 0.1 })
-            .expect_err("nan");
+    let e = lab_mjcf(
+        &lab,
+        &TargetModel {
+            mesh: Some((nan, tris.clone())),
+            greatest_dimension_m: 0.1,
+            parts: Vec::new(),
+        },
+    )
+    .expect_err("nan");
     assert!(e.to_string().contains("finite"), "{e}");
     let e =
-        lab_mjcf(&lab, &TargetModel { mesh: None, greatest_dimension_m: 0.0 }).expect_err("size");
+        lab_mjcf(&lab, &TargetModel { mesh: None, greatest_dimension_m: 0.0, parts: Vec::new() })
+            .expect_err("size");
     assert!(e.to_string().contains("greatest_dimension_m"), "{e}");
     // A good mesh is scaled to the greatest dimension: a 1 m cube becomes 0.1 m.
-    let xml = lab_mjcf(&lab, &TargetModel { mesh: Some((cube, tris)), greatest_dimension_m: 0.1 })
-        .expect("cube");
+    let xml = lab_mjcf(
+        &lab,
+        &TargetModel { mesh: Some((cube, tris)), greatest_dimension_m: 0.1, parts: Vec::new() },
+    )
+    .expect("cube");
     assert!(xml.contains("vertex=\"-5e-2 -5e-2 -5e-2"), "{}", &xml[..400.min(xml.len())]);
 }
 

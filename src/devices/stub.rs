@@ -29,11 +29,7 @@ pub fn start_stub(
     target: &hitl_perception::TargetModel,
     scale: f64,
 ) -> Result<EmbeddedStub, DeviceError> {
-    let stub_target = StubTarget {
-        mesh: Some(target.vertices_faces()),
-        greatest_dimension_m: target.greatest_dimension_m() * scale,
-    };
-    let lab_model = LabModel::generated(lab, &stub_target)
+    let lab_model = LabModel::generated(lab, &stub_target(target, scale))
         .map_err(|e| DeviceError::Failed(format!("stub scene: {e}")))?;
     let plant = MujocoPlant::from_lab_model(lab_model.clone());
     let arm = plant.shared_state();
@@ -41,6 +37,41 @@ pub fn start_stub(
     let handle = Stub::start(config, Box::new(plant))
         .map_err(|e| DeviceError::Failed(format!("stub: {e}")))?;
     Ok(EmbeddedStub { handle, lab_model, arm, light: Default::default() })
+}
+
+/// The stub's view of `target` (in model units) shown at `scale`: the merged mesh that sets its
+/// size, and its parts with their materials for the renderer.
+pub fn stub_target(target: &hitl_perception::TargetModel, scale: f64) -> StubTarget {
+    use hitl_perception::models::Texture;
+    use hitl_sim_stub::mjcf::{TargetMaterial, TargetPart, TargetTexture};
+    let f32s =
+        |v: &[[f64; 3]]| -> Vec<[f32; 3]> { v.iter().map(|p| p.map(|x| x as f32)).collect() };
+    let parts = target
+        .parts
+        .iter()
+        .map(|p| TargetPart {
+            name: p.name.clone(),
+            vertices: f32s(&p.vertices),
+            faces: p.faces.clone(),
+            texcoords: p.texcoords.clone(),
+            material: TargetMaterial {
+                rgba: p.material.rgba,
+                specular: p.material.specular,
+                shininess: p.material.shininess,
+                texture: p.material.texture.as_ref().map(|t| match t {
+                    Texture::Png(path) => TargetTexture::Png(path.clone()),
+                    Texture::CellGrid { cell_rgb, line_rgb } => {
+                        TargetTexture::CellGrid { cell_rgb: *cell_rgb, line_rgb: *line_rgb }
+                    }
+                }),
+            },
+        })
+        .collect();
+    StubTarget {
+        mesh: Some(target.vertices_faces()),
+        greatest_dimension_m: target.greatest_dimension_m() * scale,
+        parts,
+    }
 }
 
 impl EmbeddedStub {

@@ -35,7 +35,7 @@ pub fn cube() -> TargetModel {
         [1, 3, 5],
         [3, 7, 5],
     ];
-    TargetModel { mesh: Some((v, f)), greatest_dimension_m: SIDE }
+    TargetModel { mesh: Some((v, f)), greatest_dimension_m: SIDE, parts: Vec::new() }
 }
 
 /// The default lab's model with the cube, the camera pose [`HEIGHT`] above the cube's centre
