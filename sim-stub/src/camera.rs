@@ -28,7 +28,7 @@ pub mod render;
 pub use bench::bench_render;
 pub use gl::GlRenderer;
 pub use intrinsics::Preset;
-pub use noise::{FrameNoise, NoiseModel};
+pub use noise::{DepthModel, FrameNoise, NoiseModel, StereoDepth};
 pub use render::{Image, Renderer, Shading};
 
 use crate::mujoco_plant::{LabModel, SharedArmState};
@@ -484,7 +484,7 @@ pub fn capture_with<R: Draw + ?Sized>(
     let camera = renderer.camera_in_lab();
     let rendered = camera * noise.rotation;
     let mut image = renderer.render_from(&rendered, intr, level, noise.shift_px)?;
-    noise.apply_depth(&mut image.depth_m);
+    noise.apply_depth(&mut image.depth_m, &image.intrinsics);
     let base_inv = renderer.base_in_lab().inverse();
     let truth = RenderTruth {
         tick: 0,

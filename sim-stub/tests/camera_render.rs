@@ -129,7 +129,13 @@ fn pixel_noise_shifts_the_image_and_is_seeded() {
     let q = look_at_target(&lab, 0.3);
     let intr = Preset::Wfov.at(320, 256);
     let clean = render_capture(&mut r, &q, &intr, 1.0, &mut NoiseModel::default().draw(5)).0;
-    let noise = NoiseModel { sigma_px: 4.0, sigma_theta_deg: 0.0, depth_k_per_m: 0.0, seed: 11 };
+    let noise = NoiseModel {
+        sigma_px: 4.0,
+        sigma_theta_deg: 0.0,
+        depth_k_per_m: 0.0,
+        seed: 11,
+        ..NoiseModel::default()
+    };
     let mut draw = noise.draw(5);
     let shift = draw.shift_px;
     let (noisy, truth) = render_capture(&mut r, &q, &intr, 1.0, &mut draw);

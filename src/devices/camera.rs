@@ -134,6 +134,7 @@ pub fn open_camera(
             let config = SimCameraConfig {
                 intrinsics: stream.intrinsics,
                 clock: ctx.clock,
+                noise: sim.camera_noise,
                 ..Default::default()
             };
             let cam =

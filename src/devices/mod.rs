@@ -45,6 +45,40 @@ pub struct SimScene<'a> {
     pub arm: &'a hitl_sim_stub::mujoco_plant::SharedArmState,
     pub light: &'a hitl_sim_stub::camera::LightLevel,
     pub inputs: hitl_sim_stub::SimInputsReader,
+    /// The simulated camera's noise and depth model.
+    pub camera_noise: hitl_sim_stub::camera::NoiseModel,
+}
+
+/// `--depth-model`: how the simulated camera's depth is degraded (docs/sim-camera.md).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub enum SimDepthModel {
+    /// Depth as rendered, every surface pixel exact: what the README's SITL accuracy figures
+    /// were measured with (the default).
+    #[default]
+    Ideal,
+    /// The Orbbec Gemini 305's stereo depth: error k z^2, invalid pixels at edges, in the
+    /// projector's and second camera's shadows and at grazing angles, seeded per capture.
+    Orbbec,
+}
+
+impl std::str::FromStr for SimDepthModel {
+    type Err = String;
+    fn from_str(s: &str) -> Result<Self, String> {
+        match s {
+            "ideal" => Ok(Self::Ideal),
+            "orbbec" => Ok(Self::Orbbec),
+            other => Err(format!("unknown depth model {other:?} (expected ideal or orbbec)")),
+        }
+    }
+}
+
+impl std::fmt::Display for SimDepthModel {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str(match self {
+            Self::Ideal => "ideal",
+            Self::Orbbec => "orbbec",
+        })
+    }
 }
 
 /// What opening a device may use: the run's runtime (drivers' I/O tasks live on it for the

@@ -2,7 +2,7 @@
 //! that names no `--arm`, with the faults to inject (`--stub-fault`), and the pieces of its scene
 //! that the simulated camera and light share with it.
 
-use super::{DeviceError, SimScene};
+use super::{DeviceError, SimDepthModel, SimScene};
 use hitl_hal::Joints;
 use hitl_sim_stub::mjcf::TargetModel as StubTarget;
 use hitl_sim_stub::mujoco_plant::{LabModel, MujocoPlant, SharedArmState};
@@ -19,6 +19,7 @@ pub struct EmbeddedStub {
     lab_model: LabModel,
     arm: SharedArmState,
     light: hitl_sim_stub::camera::LightLevel,
+    camera_noise: hitl_sim_stub::camera::NoiseModel,
 }
 
 /// Start the stub on loopback for `lab`, with `target` (in model units) shown at `scale`, and
@@ -36,7 +37,13 @@ pub fn start_stub(
     let config = StubConfig { faults: faults.to_vec(), ..StubConfig::ephemeral() };
     let handle = Stub::start(config, Box::new(plant))
         .map_err(|e| DeviceError::Failed(format!("stub: {e}")))?;
-    Ok(EmbeddedStub { handle, lab_model, arm, light: Default::default() })
+    Ok(EmbeddedStub {
+        handle,
+        lab_model,
+        arm,
+        light: Default::default(),
+        camera_noise: Default::default(),
+    })
 }
 
 /// The stub's view of `target` (in model units) shown at `scale`: the merged mesh that sets its
@@ -75,6 +82,18 @@ pub fn stub_target(target: &hitl_perception::TargetModel, scale: f64) -> StubTar
 }
 
 impl EmbeddedStub {
+    /// The simulated camera's depth as `model` says (ideal: as rendered; orbbec: the Gemini 305's
+    /// stereo depth, docs/sim-camera.md), its noise seeded with `seed`.
+    pub fn with_depth_model(mut self, model: SimDepthModel, seed: u64) -> Self {
+        use hitl_sim_stub::camera::{DepthModel, StereoDepth};
+        self.camera_noise.depth_model = match model {
+            SimDepthModel::Ideal => DepthModel::Ideal,
+            SimDepthModel::Orbbec => DepthModel::Orbbec(StereoDepth::GEMINI_305),
+        };
+        self.camera_noise.seed = seed;
+        self
+    }
+
     /// The stub's command port.
     pub fn cmd_addr(&self) -> SocketAddr {
         self.handle.cmd_addr()
@@ -92,6 +111,7 @@ impl EmbeddedStub {
             arm: &self.arm,
             light: &self.light,
             inputs: self.handle.inputs(),
+            camera_noise: self.camera_noise,
         }
     }
 

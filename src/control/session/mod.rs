@@ -110,6 +110,8 @@ pub struct RunRequest {
     pub camera_size: Option<(u32, u32)>,
     /// Target model: a built-in name (asymmetric, one-plane, two-planes) or an OBJ/STL path.
     pub target_model: String,
+    /// How the simulated camera's depth is degraded (`--depth-model`).
+    pub depth_model: crate::devices::SimDepthModel,
     /// SITL: the lab the embedded stub simulates (`--stub-config`), when it is not the one the
     /// controller believes (`lab`): the truth a calibration must recover.
     pub stub_lab: Option<LabConfig>,
@@ -336,7 +338,8 @@ fn start_arm_target(req: &RunRequest, scene: &TargetScene) -> Result<ArmTargetLi
                 req.stub_lab.as_ref().unwrap_or(&req.lab),
                 &scene.model,
                 scene.scale,
-            )?;
+            )?
+            .with_depth_model(req.depth_model, 0);
             let cmd_addr = stub.cmd_addr();
             Ok(ArmTargetLink { cmd_addr, report_host: cmd_addr.ip(), stub: Some(stub) })
         }
