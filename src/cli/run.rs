@@ -71,7 +71,8 @@ pub struct RunArgs {
     pub target_model: String,
     /// The simulated camera's depth: ideal (as rendered, every surface pixel exact; the SITL
     /// accuracy figures' setting) or orbbec (the Gemini 305's stereo depth: error growing with
-    /// z^2, no depth at edges, in the projector's shadow and at grazing angles; docs/sim-camera.md).
+    /// z^2, no depth at edges, in the projector's shadow and at grazing angles;
+    /// docs/sim-camera.md).
     #[arg(long, default_value = "ideal", value_name = "ideal|orbbec")]
     pub depth_model: crate::devices::SimDepthModel,
     /// SITL: the lab the embedded stub simulates (camera mount, target pose, board), while the
