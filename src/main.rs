@@ -36,6 +36,9 @@ enum Command {
     Eval(cli::eval::EvalArgs),
     /// Benchmarks; `--json` prints one JSON object of figures.
     Bench(cli::bench::BenchArgs),
+    /// Calibrate the camera mount and target pose from views of the board (--print-board: draw it).
+    #[cfg(feature = "stub")]
+    Calibrate(cli::calibrate::CalibrateArgs),
     /// Commission devices: list ports and cameras, check each named device answers. Moves nothing.
     Probe(cli::probe::ProbeArgs),
     /// SITL campaigns from a manifest: run (resumable, N at a time), collect, slurm, list.
@@ -61,6 +64,8 @@ fn main() -> ExitCode {
         Command::Eval(args) => cli::eval::run(args),
         Command::Bench(args) => cli::bench::run(args),
         Command::Probe(args) => cli::probe::run(args),
+        #[cfg(feature = "stub")]
+        Command::Calibrate(args) => cli::calibrate::run(args),
         Command::Campaign(args) => cli::campaign::run(args),
     };
     ExitCode::from(code)

@@ -156,8 +156,17 @@ pub fn plan_views(
             });
             continue;
         }
-        let sols = ik::solve_from_seeds(&camera, &mount, Some(&scene), &opts, 1);
-        match sols.first() {
+        // Of the clear solutions, the one nearest a forward-leaning posture (shoulder turned to
+        // the view, upper arm forward, elbow bent), so that every view is on the same branch and
+        // the moves between views stay small.
+        let yaw = eye.y.atan2(eye.x);
+        let preferred: Joints = [yaw, 0.3, 0.0, 1.2, 0.0, 0.9, 0.0];
+        let sols = ik::solve_from_seeds(&camera, &mount, Some(&scene), &opts, 8);
+        let best = sols.iter().min_by(|a, b| {
+            let d = |q: &Joints| (0..DOF).map(|j| (q[j] - preferred[j]).powi(2)).sum::<f64>();
+            d(a).total_cmp(&d(b))
+        });
+        match best {
             Some(q) => kept.push(PlannedView { camera_in_base: camera, q: *q }),
             None => dropped.push(DroppedView {
                 index,

@@ -1,6 +1,8 @@
 //! One module per subcommand: its flags (documented for `--help`) and what it does.
 
 pub mod bench;
+#[cfg(feature = "stub")]
+pub mod calibrate;
 pub mod campaign;
 pub mod check;
 pub mod eval;

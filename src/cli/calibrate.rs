@@ -1,0 +1,571 @@
+//! `hitl calibrate`: find where the camera sits on the flange and where the target really is.
+//!
+//! Plans views of the calibration board on the target's mount (hitl_calib::views), plays them
+//! as one trajectory through `hitl run`'s session (the same preflight, interlocks, approach and
+//! confirmation for a real arm), recording the captures to a temporary MCAP file; detects the
+//! board in each colour frame (kornia-apriltag), solves the robot-world-hand-eye problem with the
+//! flange poses the recording holds (forward kinematics of the joints at exposure) and writes the
+//! lab configuration with the recovered camera mount and target pose and a `[calibration]`
+//! provenance block, atomically (a temporary file renamed into place: a refusal leaves nothing).
+//!
+//! Refusals, each with its reason and remedy (docs/calibration.md): 3 the solution's residuals or
+//! conditioning are poor (noise; views too alike); [`TOO_FEW_VIEWS`] fewer usable views than the
+//! minimum; [`BOARD_OUT_OF_VIEW`] the board was seen, but not whole in enough views;
+//! [`NEVER_DETECTED`] no tag of the board in any capture. A plan with fewer than
+//! [`MIN_PLANNED_VIEWS`] reachable views is refused before anything moves.
+
+use crate::control::session::{self, ArmTarget, RunRequest};
+use crate::devices::CameraSpec;
+use crate::exit;
+use crate::rt::RtOptions;
+use foxglove::messages as fg;
+use hitl_calib::board::{load_board_file, Board};
+use hitl_calib::solve::{self, Acceptance, SolveError, View};
+use hitl_calib::views::{self, ViewPlan};
+use hitl_drivers::light::LightSpec;
+use hitl_hal::Intrinsics;
+use hitl_perception::{BackendSpec, ReregisterPolicy};
+use hitl_record::{reader, topics};
+use hitl_trajectories::lab::{BoardPlacement, CalibrationProvenance, LabConfig};
+use hitl_trajectories::preflight;
+use hitl_trajectories::timing::SetpointTable;
+use nalgebra::{Isometry3, Quaternion, Translation3, UnitQuaternion};
+use std::io::IsTerminal;
+use std::ops::ControlFlow;
+use std::path::{Path, PathBuf};
+use std::time::Duration;
+
+/// Exit code: fewer usable views than the minimum (take more views).
+pub const TOO_FEW_VIEWS: u8 = 10;
+/// Exit code: the board was seen but not whole in enough views (check its placement).
+pub const BOARD_OUT_OF_VIEW: u8 = 11;
+/// Exit code: no tag of the board was detected in any capture.
+pub const NEVER_DETECTED: u8 = 12;
+/// Fewest views a plan must keep.
+pub const MIN_PLANNED_VIEWS: usize = 15;
+
+#[derive(Debug, clap::Args)]
+pub struct CalibrateArgs {
+    /// Write the calibrated lab configuration here (TOML).
+    #[arg(long, value_name = "CALIBRATED.toml")]
+    pub out: Option<PathBuf>,
+    /// Write the board as an SVG true to scale (width and height in mm) and exit.
+    #[arg(long, value_name = "FILE.svg")]
+    pub print_board: Option<PathBuf>,
+    /// The board definition (a `[board]` TOML file such as calib/boards/aprilgrid-6x6.toml);
+    /// default: the lab configuration's `[board]`, else that repository board.
+    #[arg(long, value_name = "BOARD.toml")]
+    pub board: Option<PathBuf>,
+    /// Lab configuration the controller uses (its nominal camera mount and target pose).
+    #[arg(long, value_name = "FILE.toml")]
+    pub config: Option<PathBuf>,
+    /// Drive the real xArm at this address. Without it the embedded stub is used.
+    #[arg(long, value_name = "HOST")]
+    pub arm: Option<String>,
+    /// SITL: the lab the embedded stub simulates (the truth to recover).
+    #[arg(long, value_name = "TRUE.toml")]
+    pub stub_config: Option<PathBuf>,
+    /// Views to plan (15-25).
+    #[arg(long, default_value_t = 20, value_name = "N")]
+    pub views: usize,
+    /// Camera: sim (the stub's) or an Orbbec spec as `hitl run --camera`.
+    #[arg(long, default_value = "sim", value_name = "sim|orbbec|...")]
+    pub camera: CameraSpec,
+    /// Light: as `hitl run --light`.
+    #[arg(long, default_value = "sim", value_name = "sim|dmx:DEV|trigger:DEV|none")]
+    pub light: LightSpec,
+    /// Simulated camera intrinsics preset (nfov, wfov, orbbec).
+    #[arg(long, default_value = "orbbec", value_name = "NAME")]
+    pub camera_preset: String,
+    /// Simulated camera resolution, WxH.
+    #[arg(long, default_value = "640x400", value_name = "WxH")]
+    pub camera_size: String,
+    /// Keep the captures: record the calibration run to this MCAP file.
+    #[arg(long, value_name = "FILE.mcap")]
+    pub record: Option<PathBuf>,
+    /// Largest RMS reprojection error accepted, pixels.
+    #[arg(long, default_value_t = Acceptance::default().max_rms_px, value_name = "PX")]
+    pub max_rms_px: f64,
+    /// Do not ask for confirmation before moving a real arm.
+    #[arg(long)]
+    pub yes: bool,
+    /// SCHED_FIFO priority of the loop thread (0: normal scheduler).
+    #[arg(long, default_value_t = 80, value_name = "PRIO")]
+    pub rt_priority: i32,
+    /// Print plain progress lines even on a terminal.
+    #[arg(long)]
+    pub plain: bool,
+}
+
+/// A refusal: exit code and message.
+struct Refusal(u8, String);
+
+fn refuse<T>(code: u8, m: impl Into<String>) -> Result<T, Refusal> {
+    Err(Refusal(code, m.into()))
+}
+
+pub fn run(args: CalibrateArgs) -> u8 {
+    match calibrate(args) {
+        Ok(()) => exit::OK,
+        Err(Refusal(code, m)) => {
+            crate::errln!("hitl calibrate: {m}");
+            code
+        }
+    }
+}
+
+fn load_lab(path: &Option<PathBuf>, what: &str) -> Result<LabConfig, Refusal> {
+    match path {
+        None => Ok(LabConfig::default()),
+        Some(p) => LabConfig::load(p).map_err(|e| Refusal(exit::BAD_INPUT, format!("{what}: {e}"))),
+    }
+}
+
+fn board_placement(args: &CalibrateArgs, lab: &LabConfig) -> Result<BoardPlacement, Refusal> {
+    match (&args.board, &lab.board) {
+        (Some(path), _) => {
+            let mut b =
+                load_board_file(path).map_err(|e| Refusal(exit::BAD_INPUT, e.to_string()))?;
+            if let Some(l) = &lab.board {
+                // The lab's placement of the board on the mount, the file's geometry.
+                b.position_target_m = l.position_target_m;
+                b.rpy_deg = l.rpy_deg;
+            }
+            Ok(b)
+        }
+        (None, Some(b)) => Ok(b.clone()),
+        (None, None) => Ok(BoardPlacement::default()),
+    }
+}
+
+/// Write `bytes` to `path` through a temporary file in the same folder, renamed into place.
+fn write_atomic(path: &Path, bytes: &[u8]) -> Result<(), Refusal> {
+    let dir = path.parent().filter(|d| !d.as_os_str().is_empty()).unwrap_or(Path::new("."));
+    let name = path.file_name().map(|n| n.to_string_lossy().to_string()).unwrap_or_default();
+    let tmp = dir.join(format!(".{name}.{}.tmp", std::process::id()));
+    let fail = |e: std::io::Error| {
+        Refusal(exit::BAD_INPUT, format!("cannot write {}: {e}", path.display()))
+    };
+    std::fs::write(&tmp, bytes).map_err(fail)?;
+    std::fs::rename(&tmp, path).map_err(|e| {
+        let _ = std::fs::remove_file(&tmp);
+        fail(e)
+    })
+}
+
+fn parse_size(s: &str) -> Result<(u32, u32), Refusal> {
+    let bad =
+        || Refusal(exit::BAD_INPUT, format!("--camera-size {s:?}: expected WxH, e.g. 640x400"));
+    let (w, h) = s.split_once(['x', 'X']).ok_or_else(bad)?;
+    let w: u32 = w.trim().parse().map_err(|_| bad())?;
+    let h: u32 = h.trim().parse().map_err(|_| bad())?;
+    if !(8..=8192).contains(&w) || !(8..=8192).contains(&h) {
+        return Err(bad());
+    }
+    Ok((w, h))
+}
+
+fn calibrate(args: CalibrateArgs) -> Result<(), Refusal> {
+    let lab = load_lab(&args.config, "--config")?;
+    let placement = board_placement(&args, &lab)?;
+    let board = Board::new(&placement).map_err(|e| Refusal(exit::BAD_INPUT, e.to_string()))?;
+    if let Some(svg) = &args.print_board {
+        write_atomic(svg, board.svg().as_bytes())?;
+        let (w, h) = board.extent_m();
+        crate::outln!(
+            "board: {} ({:.1} x {:.1} mm of tags) written to {}; print at 100 % and measure a tag",
+            board.describe(),
+            w * 1e3,
+            h * 1e3,
+            svg.display()
+        );
+        if args.out.is_none() {
+            return Ok(());
+        }
+    }
+    let Some(out) = args.out.clone() else {
+        return refuse(
+            exit::BAD_INPUT,
+            "--out CALIBRATED.toml is required (or --print-board FILE.svg)",
+        );
+    };
+    if args.arm.is_some() && args.stub_config.is_some() {
+        return refuse(
+            exit::BAD_INPUT,
+            "--stub-config only applies to the embedded stub, not to --arm",
+        );
+    }
+    if !(MIN_PLANNED_VIEWS..=views::MAX_VIEWS).contains(&args.views) {
+        return refuse(
+            TOO_FEW_VIEWS,
+            format!(
+                "--views {}: plan {MIN_PLANNED_VIEWS} to {} views",
+                args.views,
+                views::MAX_VIEWS
+            ),
+        );
+    }
+    let mut stub_lab = match &args.stub_config {
+        Some(_) => Some(load_lab(&args.stub_config, "--stub-config")?),
+        None => None,
+    };
+    // The board is on the mount in the simulated lab too, where its own [board] (or ours) says.
+    if let Some(s) = stub_lab.as_mut() {
+        s.board.get_or_insert_with(|| placement.clone());
+    }
+    let mut lab_with_board = lab.clone();
+    lab_with_board.board = Some(placement.clone());
+    // Without a hidden truth, the stub simulates the controller's lab, board included.
+    if args.arm.is_none() && stub_lab.is_none() {
+        stub_lab = Some(lab_with_board.clone());
+    }
+    let size = parse_size(&args.camera_size)?;
+    let k = hitl_sim_stub::camera::Preset::from_name(&args.camera_preset)
+        .ok_or_else(|| {
+            Refusal(
+                exit::BAD_INPUT,
+                format!("--camera-preset {:?}: nfov, wfov or orbbec", args.camera_preset),
+            )
+        })?
+        .at(size.0, size.1);
+
+    // 1. The views, each solved and in view; refused before anything moves if too few.
+    let plan = ViewPlan { count: args.views, ..ViewPlan::default() };
+    let (planned, dropped) = views::plan_views(&lab_with_board, &board, &k, &plan);
+    for d in &dropped {
+        crate::errln!("note: view {} dropped: {}", d.index + 1, d.reason);
+    }
+    if planned.len() < MIN_PLANNED_VIEWS {
+        return refuse(
+            TOO_FEW_VIEWS,
+            format!(
+                "only {} of {} views are reachable with the whole board in the image (at least \
+                 {MIN_PLANNED_VIEWS} are needed); nothing moved. Check the board's placement in \
+                 [board] and the target pose, or ask for more views (--views)",
+                planned.len(),
+                args.views
+            ),
+        );
+    }
+    let traj = views::trajectory(&planned, &lab_with_board, &plan);
+    let dir = tempfile_dir()?;
+    let npz = dir.join("calibration-views.npz");
+    hitl_trajectories::npz::save(&npz, &traj, true)
+        .map_err(|e| Refusal(exit::BAD_INPUT, format!("writing the views' trajectory: {e}")))?;
+    let table = SetpointTable::build(&traj, 250.0, 1.0)
+        .map_err(|e| Refusal(exit::BAD_INPUT, format!("timing the views' trajectory: {e}")))?;
+    let report = preflight::check(&traj, &table, &lab);
+    if !report.is_safe() {
+        let lines: Vec<String> = report.violations.iter().map(|v| v.message.clone()).collect();
+        return refuse(
+            exit::PREFLIGHT_REFUSED,
+            format!(
+                "preflight refused the views' trajectory; nothing moved:\n{}",
+                lines.join("\n")
+            ),
+        );
+    }
+    crate::outln!(
+        "calibration: {} views of {}, {:.1} s of motion",
+        planned.len(),
+        board.describe(),
+        traj.duration()
+    );
+
+    // 2. Play them through the run session, recording the captures.
+    let record = args.record.clone().unwrap_or_else(|| dir.join("calibration.mcap"));
+    let target = match &args.arm {
+        None => ArmTarget::Stub { faults: Vec::new() },
+        Some(host) => {
+            if !args.yes && !confirm(host) {
+                return refuse(
+                    exit::BAD_INPUT,
+                    format!(
+                        "not confirmed that the enclosure around {host} is clear; nothing moved"
+                    ),
+                );
+            }
+            ArmTarget::Remote { host: host.clone() }
+        }
+    };
+    let request = RunRequest {
+        trajectory: npz.clone(),
+        waypoint_rate_hz: None,
+        lab: lab.clone(),
+        rate_hz: 250.0,
+        speed_scale: 1.0,
+        target,
+        record: Some(record.clone()),
+        record_compression: hitl_record::RecorderConfig::default().compression,
+        camera: args.camera,
+        light: args.light.clone(),
+        perception: BackendSpec::None,
+        reregister: ReregisterPolicy::default(),
+        camera_preset: args.camera_preset.clone(),
+        camera_size: Some(size),
+        target_model: "asymmetric".into(),
+        stub_lab,
+        depth_model: Default::default(),
+        rt: RtOptions {
+            fifo_priority: (args.rt_priority > 0).then_some(args.rt_priority),
+            lock_memory: true,
+            cpu: None,
+            spin: Duration::ZERO,
+        },
+        plain_progress: args.plain || !std::io::stderr().is_terminal(),
+        live: None,
+    };
+    match session::run(request) {
+        Ok(r) if r.exit_code == exit::OK => {}
+        Ok(r) => {
+            return refuse(
+                r.exit_code,
+                format!("the views' run did not complete:\n{}", r.summary()),
+            )
+        }
+        Err(e) => return refuse(e.exit_code(), e.to_string()),
+    }
+
+    // 3. Detect the board in every capture, with the flange pose at its exposure.
+    let (views_seen, k_rec) = read_views(&record, &board)?;
+    let k = k_rec.unwrap_or(k);
+    let acc = Acceptance { max_rms_px: args.max_rms_px, ..Acceptance::default() };
+    let tags_seen: usize = views_seen.iter().map(|v| v.corners.len()).sum();
+    let whole = views_seen.iter().filter(|v| v.corners.len() >= acc.min_corners_per_view).count();
+    crate::outln!(
+        "captures: {}, board seen in {whole} (corners per view: {:?})",
+        views_seen.len(),
+        views_seen.iter().map(|v| v.corners.len()).collect::<Vec<_>>()
+    );
+    if tags_seen == 0 {
+        return refuse(
+            NEVER_DETECTED,
+            format!(
+                "no tag of the board ({}) was detected in any of the {} captures: check that the \
+                 board is mounted and lit, that it is the board named in [board] (family, first \
+                 id), and that the camera is focused",
+                board.describe(),
+                views_seen.len()
+            ),
+        );
+    }
+    if whole < acc.min_views {
+        return refuse(
+            BOARD_OUT_OF_VIEW,
+            format!(
+                "the board was seen whole (at least {} corners) in only {whole} of {} captures: \
+                 it is not where [board] and the target pose put it (off by more than the views' \
+                 margin); measure its placement again and rerun",
+                acc.min_corners_per_view,
+                views_seen.len()
+            ),
+        );
+    }
+
+    // 4. Solve and judge.
+    let sol = solve::solve(&views_seen, &k, &acc).map_err(|e| match e {
+        SolveError::TooFewViews(m) => Refusal(TOO_FEW_VIEWS, m),
+        SolveError::PoorConditioning(m) | SolveError::PoorResiduals(m) => {
+            Refusal(exit::PREFLIGHT_REFUSED, m)
+        }
+    })?;
+    let board_in_target = placement.board_in_target();
+    let target_in_base = sol.board_in_base * board_in_target.inverse();
+    let cov_z = sol.covariance.fixed_view::<6, 6>(6, 6).into_owned();
+    let target_sigma =
+        solve::composed_sigma(&cov_z, &sol.board_in_base, &board_in_target.inverse());
+    for (i, r) in sol.view_rms_px.iter().enumerate() {
+        crate::outln!("view {:2}: {:.3} px RMS", i + 1, r);
+    }
+    let (dcam_t, dcam_r) = solve::pose_difference(&sol.camera_mount, &lab.camera_mount());
+    let (dtgt_t, dtgt_r) = solve::pose_difference(&target_in_base, &lab.target_in_base());
+    crate::outln!(
+        "reprojection {:.3} px RMS over {} corners in {} views ({} LM iterations)",
+        sol.rms_px,
+        sol.corners,
+        sol.view_rms_px.len(),
+        sol.iterations
+    );
+    crate::outln!(
+        "camera mount: +-{:.3} mm, +-{:.4} deg (1 sigma); {:.2} mm, {:.3} deg from nominal",
+        sol.camera_sigma.mm,
+        sol.camera_sigma.deg,
+        dcam_t * 1e3,
+        dcam_r
+    );
+    crate::outln!(
+        "target pose:  +-{:.3} mm, +-{:.4} deg (1 sigma); {:.2} mm, {:.3} deg from nominal",
+        target_sigma.mm,
+        target_sigma.deg,
+        dtgt_t * 1e3,
+        dtgt_r
+    );
+
+    // 5. The calibrated lab, written atomically.
+    let mut calibrated = lab.clone();
+    calibrated.board = Some(placement.clone());
+    let (t, rpy) = parts(&sol.camera_mount);
+    calibrated.camera.translation_m = t;
+    calibrated.camera.rpy_deg = rpy;
+    let (t, rpy) = parts(&target_in_base);
+    calibrated.target.position_base_m = t;
+    calibrated.target.rpy_deg = rpy;
+    calibrated.calibration = Some(CalibrationProvenance {
+        date: utc_now(),
+        method: "hitl calibrate: kornia-apriltag corners, per-view homography pose, Shah's \
+                 robot-world-hand-eye closed form, joint Levenberg-Marquardt on reprojection error"
+            .into(),
+        board: board.describe(),
+        views: sol.view_rms_px.len() as u32,
+        rms_px: round(sol.rms_px, 4),
+        view_rms_px: sol.view_rms_px.iter().map(|r| round(*r, 4)).collect(),
+        camera_sigma_mm: round(sol.camera_sigma.mm, 4),
+        camera_sigma_deg: round(sol.camera_sigma.deg, 5),
+        target_sigma_mm: round(target_sigma.mm, 4),
+        target_sigma_deg: round(target_sigma.deg, 5),
+    });
+    calibrated.validate().map_err(|e| {
+        Refusal(exit::PREFLIGHT_REFUSED, format!("the calibrated lab is not valid: {e}"))
+    })?;
+    let text = format!(
+        "# Written by hitl calibrate on {} from {}.\n{}",
+        calibrated.calibration.as_ref().map(|c| c.date.clone()).unwrap_or_default(),
+        args.config.as_ref().map_or("the default lab".into(), |p| p.display().to_string()),
+        calibrated.to_toml()
+    );
+    write_atomic(&out, text.as_bytes())?;
+    crate::outln!("calibrated lab configuration: {}", out.display());
+    Ok(())
+}
+
+fn round(v: f64, digits: i32) -> f64 {
+    let s = 10f64.powi(digits);
+    (v * s).round() / s
+}
+
+/// Translation (m) and roll, pitch, yaw (deg, z-y-x) as the lab configuration writes them.
+fn parts(p: &Isometry3<f64>) -> ([f64; 3], [f64; 3]) {
+    let t = p.translation.vector;
+    let (r, pi, y) = p.rotation.euler_angles();
+    ([t.x, t.y, t.z], [r.to_degrees(), pi.to_degrees(), y.to_degrees()])
+}
+
+fn utc_now() -> String {
+    let secs = std::time::SystemTime::now()
+        .duration_since(std::time::UNIX_EPOCH)
+        .map(|d| d.as_secs() as i64)
+        .unwrap_or(0);
+    let days = secs.div_euclid(86_400);
+    let rem = secs.rem_euclid(86_400);
+    // Civil date from days since 1970-01-01 (Howard Hinnant's algorithm).
+    let z = days + 719_468;
+    let era = z.div_euclid(146_097);
+    let doe = z - era * 146_097;
+    let yoe = (doe - doe / 1460 + doe / 36_524 - doe / 146_096) / 365;
+    let doy = doe - (365 * yoe + yoe / 4 - yoe / 100);
+    let mp = (5 * doy + 2) / 153;
+    let d = doy - (153 * mp + 2) / 5 + 1;
+    let m = if mp < 10 { mp + 3 } else { mp - 9 };
+    let y = yoe + era * 400 + i64::from(m <= 2);
+    format!("{y:04}-{m:02}-{d:02}T{:02}:{:02}:{:02}Z", rem / 3600, rem % 3600 / 60, rem % 60)
+}
+
+/// A private temporary folder for the views' trajectory and recording (kept until exit).
+fn tempfile_dir() -> Result<PathBuf, Refusal> {
+    let dir = std::env::temp_dir().join(format!("hitl-calibrate-{}", std::process::id()));
+    std::fs::create_dir_all(&dir)
+        .map_err(|e| Refusal(exit::DEVICE, format!("cannot create {}: {e}", dir.display())))?;
+    Ok(dir)
+}
+
+fn confirm(host: &str) -> bool {
+    if !std::io::stdin().is_terminal() {
+        return false;
+    }
+    crate::err!("About to move the REAL arm at {host} through the calibration views. Is the enclosure clear and the door closed? [y/N] ");
+    let mut line = String::new();
+    std::io::stdin().read_line(&mut line).is_ok()
+        && matches!(line.trim(), "y" | "Y" | "yes" | "YES")
+}
+
+/// The recording's colour captures, each with the flange pose at its exposure (from `/tf`) and
+/// the board corners found in it; and the camera's intrinsics as recorded.
+fn read_views(path: &Path, board: &Board) -> Result<(Vec<View>, Option<Intrinsics>), Refusal> {
+    let bad = |m: String| {
+        Refusal(exit::DEVICE, format!("reading the calibration recording {}: {m}", path.display()))
+    };
+    let rec = reader::read_recording(path).map_err(|e| bad(e.to_string()))?;
+    let mut images: Vec<(u64, fg::RawImage)> = Vec::new();
+    let mut k: Option<Intrinsics> = None;
+    reader::visit(
+        path,
+        |m| {
+            if m.topic == topics::COLOR {
+                if let Ok(img) = reader::decode_image(m.data) {
+                    let t = img.timestamp.map(|t| t.total_nanos()).unwrap_or(m.log_time);
+                    images.push((t, img));
+                }
+            } else if m.topic == topics::CALIBRATION && k.is_none() {
+                if let Ok(c) = <fg::CameraCalibration as prost::Message>::decode(m.data) {
+                    if c.k.len() == 9 {
+                        k = Some(Intrinsics {
+                            width: c.width,
+                            height: c.height,
+                            fx: c.k[0],
+                            fy: c.k[4],
+                            cx: c.k[2],
+                            cy: c.k[5],
+                        });
+                    }
+                }
+            }
+            ControlFlow::Continue(())
+        },
+        |_, _| {},
+    )
+    .map_err(|e| bad(e.to_string()))?;
+    images.sort_by_key(|(t, _)| *t);
+    let mut out = Vec::new();
+    for (t, img) in images {
+        let Some(tf) = rec.tf.iter().min_by_key(|m| m.t_ns.abs_diff(t)) else { continue };
+        if tf.t_ns.abs_diff(t) > 20_000_000 {
+            continue;
+        }
+        let (w, h, step) = (img.width as usize, img.height as usize, img.step as usize);
+        let bpp = match img.encoding.as_str() {
+            "rgb8" => 3,
+            "mono8" => 1,
+            other => return Err(bad(format!("colour encoding {other} is not rgb8 or mono8"))),
+        };
+        if step < w * bpp || img.data.len() < step * h {
+            return Err(bad(format!(
+                "a {w}x{h} {} image of {} bytes",
+                img.encoding,
+                img.data.len()
+            )));
+        }
+        let mut grey = Vec::with_capacity(w * h);
+        for row in img.data.chunks(step).take(h) {
+            let row = &row[..w * bpp];
+            if bpp == 3 {
+                grey.extend(hitl_calib::detect::rgb_to_grey(row));
+            } else {
+                grey.extend_from_slice(row);
+            }
+        }
+        let det = hitl_calib::detect(board, img.width as usize, img.height as usize, &grey)
+            .map_err(|e| bad(e.to_string()))?;
+        let p = &tf.base_flange;
+        let base_flange = Isometry3::from_parts(
+            Translation3::new(p.translation[0], p.translation[1], p.translation[2]),
+            UnitQuaternion::from_quaternion(Quaternion::new(
+                p.rotation[3],
+                p.rotation[0],
+                p.rotation[1],
+                p.rotation[2],
+            )),
+        );
+        out.push(View { base_flange, corners: det.corners });
+    }
+    Ok((out, k))
+}
