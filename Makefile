@@ -4,7 +4,7 @@
 SHELL := /bin/bash
 CARGO ?= cargo
 
-.PHONY: all setup build demo test test-rust lint bench clean-deps
+.PHONY: all setup build demo test test-rust lint bench clean-deps test-slurm
 
 all: build
 
@@ -27,6 +27,12 @@ test-rust:
 lint:
 	$(CARGO) fmt --all -- --check
 	$(CARGO) clippy --workspace --all-targets -- -D warnings
+
+# Opt-in: a real single-node Slurm on this machine (munge, slurmctld, slurmd; loopback only; needs
+# root) plays a 4-case campaign as a job array (docs/campaigns.md).
+test-slurm: setup
+	$(CARGO) build
+	bash scripts/slurm/test.sh
 
 bench: setup
 	$(CARGO) build --release

@@ -39,6 +39,11 @@ pub struct EvalArgs {
     /// metadata; else on the first frame and after a lost one only).
     #[command(flatten)]
     pub reregister: ReregisterArgs,
+    /// With --backend: decimate the estimator's mesh to at most N faces (quadric decimation,
+    /// meshoptimizer) before re-running it; the rendered target was never decimated. The paper's
+    /// RQ2 mesh resolution.
+    #[arg(long, value_name = "N")]
+    pub mesh_faces: Option<usize>,
     /// Also list every frame's errors (e_t, e_r, or "failed"), to see where a track went wrong;
     /// with --json they go in a `per_frame` array.
     #[arg(long)]
@@ -109,6 +114,11 @@ fn eval(args: &EvalArgs) -> Result<serde_json::Value, String> {
                     the recorded estimates are scored as they are"
             .into());
     }
+    if args.mesh_faces.is_some() && args.backend.is_none() {
+        return Err("--mesh-faces decimates the mesh of a --backend re-run; \
+                    the recorded estimates are scored as they are"
+            .into());
+    }
     let rec = hitl_record::reader::read_recording(path).map_err(|e| e.to_string())?;
     let run_meta = rec.metadata.get("run");
     let scale = match args.scale {
@@ -137,7 +147,14 @@ fn eval(args: &EvalArgs) -> Result<serde_json::Value, String> {
                 .or_else(|| run_meta.and_then(|m| m.get("target_model")).cloned())
                 .unwrap_or_else(|| "asymmetric".to_string());
             let model = TargetModel::from_spec(&target).map_err(|e| e.to_string())?;
-            let mesh = model.lab_mesh(scale).map_err(|e| e.to_string())?;
+            let mut mesh = model.lab_mesh(scale).map_err(|e| e.to_string())?;
+            if let Some(n) = args.mesh_faces {
+                let d = hitl_perception::models::decimate::decimate(&mesh, n)
+                    .map_err(|e| format!("--mesh-faces {n}: {e}"))?;
+                extra.insert("mesh_faces".into(), serde_json::json!(d.mesh.faces().len()));
+                extra.insert("mesh_faces_before".into(), serde_json::json!(d.faces_before));
+                mesh = d.mesh;
+            }
             let policy = if args.reregister.given() {
                 args.reregister.policy().map_err(|e| e.to_string())?
             } else {

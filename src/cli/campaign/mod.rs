@@ -1,0 +1,172 @@
+//! `hitl campaign`: the paper's SITL sweeps from one manifest (docs/campaigns.md).
+//!
+//! - [`manifest`]: the TOML manifest, its cases and their ids;
+//! - [`run`]: `hitl campaign run`, every case as plan, SITL run and eval child processes;
+//! - [`store`]: the campaign folder, atomic writes, which cases are done;
+//! - [`collect`]: `hitl campaign collect`, results.csv; [`plots`]: its SVG plots;
+//! - [`slurm`]: `hitl campaign slurm`, an sbatch job array with one task per case;
+//! - [`phase`]: a Sun phase window turned into the arc `hitl plan --arc` plays.
+
+pub mod collect;
+pub mod manifest;
+pub mod phase;
+pub mod plots;
+pub mod run;
+pub mod slurm;
+pub mod store;
+
+use crate::exit;
+use std::path::PathBuf;
+
+/// Flags of `hitl campaign`.
+#[derive(Debug, clap::Args)]
+pub struct CampaignArgs {
+    #[command(subcommand)]
+    pub command: CampaignCommand,
+}
+
+#[derive(Debug, clap::Subcommand)]
+pub enum CampaignCommand {
+    /// Play every case (plan, SITL run with recording, eval), resuming where a previous run stopped.
+    Run(RunArgs),
+    /// Tabulate a campaign folder: DIR/results.csv and the paper's plots under DIR/plots/.
+    Collect(CollectArgs),
+    /// Write an sbatch script running the cases as a Slurm job array (one task per case).
+    Slurm(SlurmArgs),
+    /// List a manifest's cases (index, id, parameters) without running anything.
+    List(ListArgs),
+}
+
+/// Flags of `hitl campaign run`.
+#[derive(Debug, clap::Args)]
+pub struct RunArgs {
+    /// The manifest (TOML: [run] fixed parameters, [matrix] lists; docs/campaigns.md).
+    pub manifest: PathBuf,
+    /// Campaign folder: one folder per case under DIR/cases/, results.csv after collect.
+    #[arg(long, value_name = "DIR")]
+    pub out: PathBuf,
+    /// Cases at a time (default: half the cores, at least 1, so every run's real-time loop,
+    /// renderer and estimator keep room).
+    #[arg(long, value_name = "N")]
+    pub jobs: Option<usize>,
+    /// Play case I alone (0-based, as `hitl campaign list` numbers them; a Slurm array task).
+    #[arg(long, value_name = "I")]
+    pub index: Option<usize>,
+    /// Plain progress lines instead of a progress bar (logs, batch jobs).
+    #[arg(long)]
+    pub plain: bool,
+}
+
+/// Flags of `hitl campaign collect`.
+#[derive(Debug, clap::Args)]
+pub struct CollectArgs {
+    /// A campaign folder written by `hitl campaign run --out DIR`.
+    pub dir: PathBuf,
+}
+
+/// Flags of `hitl campaign list`.
+#[derive(Debug, clap::Args)]
+pub struct ListArgs {
+    /// The manifest.
+    pub manifest: PathBuf,
+}
+
+/// Flags of `hitl campaign slurm`.
+#[derive(Debug, clap::Args)]
+pub struct SlurmArgs {
+    /// The manifest.
+    pub manifest: PathBuf,
+    /// Campaign folder (on a file system every node sees).
+    #[arg(long, value_name = "DIR")]
+    pub out: PathBuf,
+    /// Also submit the script with sbatch.
+    #[arg(long)]
+    pub submit: bool,
+    /// Most array tasks running at once (the `%LIMIT` of `--array`).
+    #[arg(long, value_name = "N", default_value_t = 16)]
+    pub limit: usize,
+    /// CPUs per task (a run's loop, renderer and estimator: 2 keeps the loop a core).
+    #[arg(long, value_name = "N", default_value_t = 2)]
+    pub cpus_per_task: usize,
+    /// Memory per task, e.g. 4G.
+    #[arg(long, value_name = "SIZE", default_value = "4G")]
+    pub mem: String,
+    /// Time limit per task in minutes (default: from the longest case's duration).
+    #[arg(long, value_name = "MIN")]
+    pub time_min: Option<u64>,
+    /// Slurm partition.
+    #[arg(long, value_name = "NAME")]
+    pub partition: Option<String>,
+    /// Slurm account.
+    #[arg(long, value_name = "NAME")]
+    pub account: Option<String>,
+    /// Folder of the shared libraries hitl loads (MuJoCo, ONNX Runtime, Orbbec SDK); default:
+    /// .deps/lib of the checkout the binary was built in.
+    #[arg(long, value_name = "DIR")]
+    pub lib_dir: Option<PathBuf>,
+    /// Where to write the script (default: DIR/slurm/NAME.sbatch).
+    #[arg(long, value_name = "FILE")]
+    pub script: Option<PathBuf>,
+}
+
+/// Run `hitl campaign`.
+pub fn run(args: CampaignArgs) -> u8 {
+    match args.command {
+        CampaignCommand::Run(a) => run_cmd(a),
+        CampaignCommand::Collect(a) => collect::run(&a.dir),
+        CampaignCommand::Slurm(a) => slurm::run(&a),
+        CampaignCommand::List(a) => list(&a),
+    }
+}
+
+/// The manifest and its text, or the exit code after saying why not.
+pub fn load(path: &std::path::Path) -> Result<(manifest::Manifest, String), u8> {
+    let text = std::fs::read_to_string(path).map_err(|e| {
+        crate::errln!("hitl campaign: {}: {e}", path.display());
+        exit::BAD_INPUT
+    })?;
+    let m = manifest::load(path).map_err(|e| {
+        crate::errln!("hitl campaign: {e}");
+        exit::BAD_INPUT
+    })?;
+    Ok((m, text))
+}
+
+fn run_cmd(a: RunArgs) -> u8 {
+    let (m, text) = match load(&a.manifest) {
+        Ok(x) => x,
+        Err(code) => return code,
+    };
+    let exe = match std::env::current_exe() {
+        Ok(e) => e,
+        Err(e) => {
+            crate::errln!("hitl campaign run: cannot find this executable: {e}");
+            return exit::BAD_INPUT;
+        }
+    };
+    if a.jobs == Some(0) {
+        crate::errln!("hitl campaign run: --jobs must be at least 1");
+        return exit::BAD_INPUT;
+    }
+    let opts = run::RunOptions {
+        out: a.out,
+        jobs: a.jobs.unwrap_or_else(run::default_jobs),
+        index: a.index,
+        plain: a.plain,
+        exe,
+    };
+    run::run(&m, &text, &opts)
+}
+
+fn list(a: &ListArgs) -> u8 {
+    let (m, _) = match load(&a.manifest) {
+        Ok(x) => x,
+        Err(code) => return code,
+    };
+    crate::outln!("campaign {}: {} cases", m.name, m.cases.len());
+    for c in &m.cases {
+        let what: Vec<String> = c.varied.iter().map(|k| format!("{k}={}", c.cell(k))).collect();
+        crate::outln!("{:4}  {}  {}", c.index, c.id, what.join(" "));
+    }
+    exit::OK
+}

@@ -1,0 +1,451 @@
+//! `hitl campaign run`: play a manifest's cases on this machine, N at a time. Each case is three
+//! child processes of this same executable (`hitl plan`, a SITL `hitl run` with a recording,
+//! `hitl eval --json`), so a case that fails, or crashes, is recorded and the campaign goes on.
+//! Each stage's output is renamed into place only when the stage is over, so an interrupted
+//! campaign resumes where it stopped; a case whose result exists for the same definition is
+//! skipped. Campaigns drive the embedded stub only (no `--arm` is ever passed).
+
+use super::manifest::{Case, Manifest};
+use super::phase;
+use super::store::{self, write_atomic};
+use hitl_trajectories::planner::DEFAULT_WAYPOINT_RATE_HZ;
+use serde_json::{json, Value};
+use std::path::{Path, PathBuf};
+use std::process::{Command, Stdio};
+use std::sync::atomic::{AtomicBool, AtomicUsize, Ordering};
+use std::sync::{Arc, Mutex};
+use std::time::Instant;
+
+/// Exit code of a campaign in which at least one case failed (each case's own exit code is in its
+/// result).
+pub const CASES_FAILED: u8 = 1;
+
+/// Characters of a failed stage's output kept in its result.
+const TAIL_CHARS: usize = 2000;
+
+/// How to run a campaign.
+#[derive(Debug, Clone)]
+pub struct RunOptions {
+    pub out: PathBuf,
+    pub jobs: usize,
+    pub index: Option<usize>,
+    pub plain: bool,
+    /// The `hitl` executable the stages run.
+    pub exe: PathBuf,
+}
+
+/// Cases at a time when `--jobs` is not given: half the cores (at least one), so every run's
+/// real-time loop, renderer and estimator keep a core's worth of room.
+pub fn default_jobs() -> usize {
+    std::thread::available_parallelism().map_or(1, |n| (n.get() / 2).max(1))
+}
+
+/// What one case came to.
+#[derive(Debug, Clone, PartialEq)]
+pub enum Outcome {
+    Skipped,
+    Ok,
+    Failed { stage: String, code: Option<i32> },
+}
+
+/// Play the cases; returns the exit code (0 all done, [`CASES_FAILED`], 130 interrupted, 2 bad
+/// `--index` or output folder).
+pub fn run(manifest: &Manifest, manifest_text: &str, opts: &RunOptions) -> u8 {
+    let selected: Vec<&Case> = match opts.index {
+        Some(i) => match manifest.cases.get(i) {
+            Some(c) => vec![c],
+            None => {
+                crate::errln!(
+                    "hitl campaign run: --index {i} is out of range: {} has {} cases (0-{})",
+                    manifest.path.display(),
+                    manifest.cases.len(),
+                    manifest.cases.len().saturating_sub(1)
+                );
+                return crate::exit::BAD_INPUT;
+            }
+        },
+        None => manifest.cases.iter().collect(),
+    };
+    if let Err(e) = write_index(manifest, manifest_text, &opts.out) {
+        crate::errln!("hitl campaign run: {}: {e}", opts.out.display());
+        return crate::exit::BAD_INPUT;
+    }
+    let (done, todo): (Vec<&Case>, Vec<&Case>) =
+        selected.into_iter().partition(|c| store::is_done(&opts.out, c));
+    crate::outln!(
+        "campaign {}: {} cases, {} already done, {} to run, {} at a time -> {}",
+        manifest.name,
+        done.len() + todo.len(),
+        done.len(),
+        todo.len(),
+        opts.jobs.min(todo.len()).max(1),
+        opts.out.display()
+    );
+    let stop = Arc::new(AtomicBool::new(false));
+    {
+        let stop = stop.clone();
+        // A second handler cannot be installed (tests calling this twice): then Ctrl-C simply
+        // ends the process as it would without one.
+        let _ = ctrlc::set_handler(move || stop.store(true, Ordering::SeqCst));
+    }
+    let bar = progress_bar(todo.len(), opts.plain);
+    let next = AtomicUsize::new(0);
+    let outcomes: Mutex<Vec<(usize, Outcome)>> = Mutex::new(Vec::new());
+    let t0 = Instant::now();
+    std::thread::scope(|s| {
+        for _ in 0..opts.jobs.clamp(1, todo.len().max(1)) {
+            s.spawn(|| loop {
+                if stop.load(Ordering::SeqCst) {
+                    break;
+                }
+                let k = next.fetch_add(1, Ordering::SeqCst);
+                let Some(case) = todo.get(k) else { break };
+                let started = Instant::now();
+                let outcome = play_case(case, &opts.out, &opts.exe);
+                let line = describe(case, &outcome, started.elapsed().as_secs_f64(), &opts.out);
+                match &bar {
+                    Some(b) => {
+                        b.println(line);
+                        b.inc(1);
+                    }
+                    None => crate::outln!("[{}/{}] {line}", k + 1, todo.len()),
+                }
+                if let Ok(mut o) = outcomes.lock() {
+                    o.push((case.index, outcome));
+                }
+            });
+        }
+    });
+    if let Some(b) = &bar {
+        b.finish_and_clear();
+    }
+    let outcomes = outcomes.into_inner().unwrap_or_default();
+    let failed = outcomes.iter().filter(|(_, o)| matches!(o, Outcome::Failed { .. })).count();
+    let played = outcomes.len();
+    crate::outln!(
+        "campaign {}: {} played ({} failed), {} skipped, {} not started, in {:.1} s; \
+         `hitl campaign collect {}` tabulates",
+        manifest.name,
+        played,
+        failed,
+        done.len(),
+        todo.len() - played,
+        t0.elapsed().as_secs_f64(),
+        opts.out.display()
+    );
+    if stop.load(Ordering::SeqCst) {
+        crate::errln!("hitl campaign run: interrupted; run it again to resume");
+        130
+    } else if failed > 0 {
+        CASES_FAILED
+    } else {
+        crate::exit::OK
+    }
+}
+
+fn progress_bar(len: usize, plain: bool) -> Option<indicatif::ProgressBar> {
+    use std::io::IsTerminal;
+    if plain || len == 0 || !std::io::stderr().is_terminal() {
+        return None;
+    }
+    let bar = indicatif::ProgressBar::new(len as u64);
+    if let Ok(style) = indicatif::ProgressStyle::with_template(
+        "{bar:40} {pos}/{len} cases  {elapsed_precise} elapsed, ETA {eta_precise}",
+    ) {
+        bar.set_style(style);
+    }
+    bar.enable_steady_tick(std::time::Duration::from_secs(1));
+    Some(bar)
+}
+
+/// One line about a finished case.
+fn describe(case: &Case, outcome: &Outcome, secs: f64, out: &Path) -> String {
+    let what: Vec<String> = case.varied.iter().map(|k| format!("{k}={}", case.cell(k))).collect();
+    let head = format!("case {} [{}] {}", case.index, case.id, what.join(" "));
+    match outcome {
+        Outcome::Skipped => format!("{head}: skipped"),
+        Outcome::Ok => {
+            let r = store::read_result(out, &case.id).unwrap_or(Value::Null);
+            let m = |k: &str| r.pointer(&format!("/metrics/{k}")).and_then(Value::as_f64);
+            format!(
+                "{head}: ok in {secs:.1} s, {} frames, mean e_t {} m, mean e_r {} deg",
+                r.pointer("/metrics/frames").cloned().unwrap_or(Value::Null),
+                m("mean_et_m").map_or("-".into(), |x| format!("{x:.4}")),
+                m("mean_er_deg").map_or("-".into(), |x| format!("{x:.2}")),
+            )
+        }
+        Outcome::Failed { stage, code } => format!(
+            "{head}: FAILED in {stage} (exit {}) after {secs:.1} s; see {}",
+            code.map_or("by signal".into(), |c| c.to_string()),
+            store::case_dir(out, &case.id).display()
+        ),
+    }
+}
+
+/// DIR/manifest.toml and DIR/cases.json: what the folder's cases are (collect reads these).
+fn write_index(manifest: &Manifest, text: &str, out: &Path) -> std::io::Result<()> {
+    std::fs::create_dir_all(out.join("cases"))?;
+    write_atomic(&out.join("manifest.toml"), text.as_bytes())?;
+    let cases: Vec<Value> = manifest
+        .cases
+        .iter()
+        .map(|c| json!({ "index": c.index, "id": c.id, "definition": c.definition() }))
+        .collect();
+    let index = json!({ "name": manifest.name, "varied": manifest.varied, "cases": cases });
+    write_atomic(&out.join("cases.json"), format!("{index:#}\n").as_bytes())
+}
+
+/// A stage that ended badly: its name, exit code (None: killed by a signal) and output tail.
+struct StageFailure {
+    stage: &'static str,
+    code: Option<i32>,
+    tail: String,
+}
+
+/// Run `exe ARGS` with stderr into `log` and stdout into `stdout` (or `log` too); Ok(()) on exit 0.
+fn stage(
+    exe: &Path,
+    stage: &'static str,
+    args: &[String],
+    log: &Path,
+    stdout: Option<&Path>,
+) -> Result<(), StageFailure> {
+    let fail = |code: Option<i32>, extra: String| StageFailure {
+        stage,
+        code,
+        tail: format!("{extra}{}", store::tail(log, TAIL_CHARS)),
+    };
+    let err =
+        std::fs::File::create(log).map_err(|e| fail(None, format!("{}: {e}\n", log.display())))?;
+    let out = match stdout {
+        Some(p) => std::fs::File::create(p),
+        None => err.try_clone(),
+    }
+    .map_err(|e| fail(None, format!("{e}\n")))?;
+    let status = Command::new(exe)
+        .args(args)
+        .stdin(Stdio::null())
+        .stdout(out)
+        .stderr(err)
+        .status()
+        .map_err(|e| fail(None, format!("cannot start {}: {e}\n", exe.display())))?;
+    if status.success() {
+        Ok(())
+    } else {
+        Err(fail(status.code(), String::new()))
+    }
+}
+
+fn s(x: impl ToString) -> String {
+    x.to_string()
+}
+
+/// `hitl plan` arguments of a case (the trajectory goes to `out`).
+fn plan_args(case: &Case, out: &Path) -> Result<(Vec<String>, Option<String>), String> {
+    let preset = case.text("preset").unwrap_or("flyaround").to_string();
+    let range = case.number("range_m").unwrap_or(10.0);
+    let every = case.number("capture_every_s").unwrap_or(0.5);
+    let k = ((every * DEFAULT_WAYPOINT_RATE_HZ).round() as u64).max(1);
+    let mut a = vec![
+        s("plan"),
+        s("--preset"),
+        preset.clone(),
+        s("--range-m"),
+        s(range),
+        s("--duration-s"),
+        s(case.number("duration_s").unwrap_or(20.0)),
+        s("--capture-every"),
+        s(k),
+        s("--out"),
+        s(out.display()),
+        s("--json"),
+    ];
+    let mut arc = case.text("arc_deg").map(str::to_string);
+    if let Some(w) = case.text("sun_phase_deg") {
+        let window = super::manifest::parse_window(w).ok_or(format!("sun_phase_deg {w:?}"))?;
+        let (from, to) = phase::arc_for_window(&preset, range, window)?;
+        arc = Some(format!("{from}:{to}"));
+    }
+    if let Some(arc) = &arc {
+        a.extend([s("--arc"), arc.clone()]);
+    }
+    if let Some(c) = case.text("config") {
+        a.extend([s("--config"), s(c)]);
+    }
+    Ok((a, arc))
+}
+
+/// `hitl run` arguments of a case.
+fn run_args(case: &Case, plan: &Path, record: &Path) -> Vec<String> {
+    let mut a = vec![
+        s("run"),
+        s(plan.display()),
+        s("--record"),
+        s(record.display()),
+        s("--camera"),
+        s("sim"),
+        s("--light"),
+        s("sim"),
+        s("--camera-preset"),
+        s(case.text("camera_preset").unwrap_or("wfov")),
+        s("--perception"),
+        s(case.text("perception").unwrap_or("icp")),
+        s("--target-model"),
+        s(case.text("target").unwrap_or("asymmetric")),
+        s("--plain"),
+    ];
+    if let Some(size) = case.text("camera_size") {
+        a.extend([s("--camera-size"), s(size)]);
+    }
+    if let Some(kind) = case.text("scene_kind") {
+        a.extend([s("--scene-kind"), s(kind)]);
+    }
+    if let Some(c) = case.text("config") {
+        a.extend([s("--config"), s(c)]);
+    }
+    if let Some(p) = case.params.get("rt_priority").and_then(Value::as_i64) {
+        a.extend([s("--rt-priority"), s(p)]);
+    }
+    if let Some(n) = case.params.get("reregister_every").and_then(Value::as_u64) {
+        a.extend([s("--reregister-every"), s(n)]);
+    }
+    a
+}
+
+/// `hitl eval` (stdout: one JSON object) into `json_out` atomically.
+fn eval_stage(
+    exe: &Path,
+    name: &'static str,
+    args: &[String],
+    json_out: &Path,
+    log: &Path,
+) -> Result<Value, StageFailure> {
+    let fail = |code: Option<i32>, tail: String| StageFailure { stage: name, code, tail };
+    let out = Command::new(exe)
+        .args(args)
+        .stdin(Stdio::null())
+        .output()
+        .map_err(|e| fail(None, format!("cannot start {}: {e}", exe.display())))?;
+    let _ = std::fs::write(log, &out.stderr);
+    if !out.status.success() {
+        return Err(fail(out.status.code(), store::tail(log, TAIL_CHARS)));
+    }
+    let v: Value = serde_json::from_slice(&out.stdout)
+        .map_err(|e| fail(None, format!("hitl eval printed no JSON object: {e}")))?;
+    write_atomic(json_out, format!("{v}\n").as_bytes())
+        .map_err(|e| fail(None, format!("{}: {e}", json_out.display())))?;
+    Ok(v)
+}
+
+/// Play one case and write its result; stages whose output already exists are not repeated.
+pub fn play_case(case: &Case, out: &Path, exe: &Path) -> Outcome {
+    let dir = store::case_dir(out, &case.id);
+    let t0 = Instant::now();
+    let mut result = json!({
+        "id": case.id,
+        "index": case.index,
+        "definition": case.definition(),
+    });
+    let outcome = match play_stages(case, &dir, exe, &mut result) {
+        Ok(()) => {
+            result["status"] = json!("ok");
+            Outcome::Ok
+        }
+        Err(f) => {
+            result["status"] = json!("failed");
+            result["failed_stage"] = json!(f.stage);
+            result["exit_code"] = json!(f.code);
+            result["stderr_tail"] = json!(f.tail);
+            Outcome::Failed { stage: f.stage.to_string(), code: f.code }
+        }
+    };
+    result["wall_s"] = json!(t0.elapsed().as_secs_f64());
+    let unix = std::time::SystemTime::now()
+        .duration_since(std::time::UNIX_EPOCH)
+        .map_or(0, |d| d.as_secs());
+    result["finished_unix_s"] = json!(unix);
+    if let Err(e) = write_atomic(&dir.join("result.json"), format!("{result:#}\n").as_bytes()) {
+        crate::errln!("hitl campaign run: {}: {e}", dir.display());
+        return Outcome::Failed { stage: "result".into(), code: None };
+    }
+    outcome
+}
+
+fn play_stages(
+    case: &Case,
+    dir: &Path,
+    exe: &Path,
+    result: &mut Value,
+) -> Result<(), StageFailure> {
+    let io = |e: std::io::Error| StageFailure { stage: "setup", code: None, tail: e.to_string() };
+    std::fs::create_dir_all(dir).map_err(io)?;
+    store::remove_stale_temps(dir);
+    let _ = std::fs::remove_file(dir.join("result.json"));
+
+    // 1. plan
+    let plan = dir.join("plan.npz");
+    let tmp = store::temp_path(&plan);
+    let (args, arc) = plan_args(case, &tmp).map_err(|e| StageFailure {
+        stage: "plan",
+        code: Some(2),
+        tail: e,
+    })?;
+    result["arc_deg"] = json!(arc);
+    let plan_json = dir.join("plan.json");
+    if !plan.exists() || !plan_json.exists() {
+        let tmp_json = store::temp_path(&plan_json);
+        stage(exe, "plan", &args, &dir.join("plan.log"), Some(&tmp_json))?;
+        std::fs::rename(&tmp, &plan).map_err(io)?;
+        std::fs::rename(&tmp_json, &plan_json).map_err(io)?;
+    }
+    // The planned Sun phase range, for the tables (hitl plan --json's summary).
+    let summary: Value = std::fs::read_to_string(&plan_json)
+        .ok()
+        .and_then(|t| serde_json::from_str(&t).ok())
+        .unwrap_or(Value::Null);
+    result["planned_sun_phase_deg"] =
+        summary.pointer("/summary/sun_phase_deg").cloned().unwrap_or(Value::Null);
+
+    // 2. run (SITL, recorded); a failed run keeps its recording as run-failed.mcap for a look,
+    // and the case is played again on the next campaign run.
+    let rec = dir.join("run.mcap");
+    if !rec.exists() {
+        let tmp = store::temp_path(&rec);
+        let r = stage(exe, "run", &run_args(case, &plan, &tmp), &dir.join("run.log"), None);
+        match r {
+            Ok(()) => std::fs::rename(&tmp, &rec).map_err(io)?,
+            Err(f) => {
+                let _ = std::fs::rename(&tmp, dir.join("run-failed.mcap"));
+                return Err(f);
+            }
+        }
+    }
+    let _ = std::fs::remove_file(dir.join("run-failed.mcap"));
+
+    // 3. eval: the run's own estimates (ground-truth mesh), then the decimated mesh if asked.
+    let rec_s = s(rec.display());
+    let gt_args = vec![s("eval"), rec_s.clone(), s("--json")];
+    let gt =
+        eval_stage(exe, "eval", &gt_args, &dir.join("eval-gt.json"), &dir.join("eval-gt.log"))?;
+    let metrics = match case.mesh_faces() {
+        None => {
+            write_atomic(&dir.join("eval.json"), format!("{gt}\n").as_bytes()).map_err(io)?;
+            gt.clone()
+        }
+        Some(n) => {
+            let backend = match case.text("perception") {
+                None | Some("none") => "icp",
+                Some(p) => p,
+            };
+            let mut a = gt_args.clone();
+            a.extend([s("--backend"), s(backend), s("--mesh-faces"), s(n)]);
+            if let Some(t) = case.text("target") {
+                a.extend([s("--target"), s(t)]);
+            }
+            eval_stage(exe, "eval-mesh", &a, &dir.join("eval.json"), &dir.join("eval.log"))?
+        }
+    };
+    result["metrics"] = metrics;
+    result["baseline"] = gt;
+    Ok(())
+}
