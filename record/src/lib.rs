@@ -12,6 +12,7 @@ pub mod bench;
 pub mod compression;
 pub mod error;
 pub mod health;
+pub mod live;
 pub mod metadata;
 pub mod msg;
 pub mod queues;
@@ -24,6 +25,7 @@ pub mod topics;
 pub use compression::{ChunkCompression, CompressionParseError};
 pub use error::{ReadError, RecordError};
 pub use health::RecorderHealth;
+pub use live::{LiveConfig, LiveError, LiveServer, LiveSummary, LiveTap};
 pub use metadata::{RunMetadata, SunPhaseTrack};
 pub use msg::{
     ArmStateMsg, CaptureSyncMsg, DepthImage, EventDetail, EventKind, FrameRecord, LightMsg, Phase,

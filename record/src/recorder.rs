@@ -8,6 +8,7 @@
 use crate::compression::ChunkCompression;
 use crate::error::RecordError;
 use crate::health::RecorderHealth;
+use crate::live::LiveTap;
 use crate::metadata::RunMetadata;
 use crate::msg::{EventKind, SafetyEventMsg};
 use crate::queues::{QueueCapacity, Telemetry, COUNTED_TOPICS};
@@ -100,8 +101,19 @@ impl Recorder {
         meta: &RunMetadata,
         cfg: RecorderConfig,
     ) -> Result<(RecorderHandle, Telemetry), RecordError> {
+        Self::spawn_live(path, meta, cfg, None)
+    }
+
+    /// [`Recorder::spawn_with`], also streaming what it writes to a live view (`hitl run --live`,
+    /// see [`crate::live`]).
+    pub fn spawn_live(
+        path: impl AsRef<Path>,
+        meta: &RunMetadata,
+        cfg: RecorderConfig,
+        live: Option<LiveTap>,
+    ) -> Result<(RecorderHandle, Telemetry), RecordError> {
         let path = path.as_ref().to_path_buf();
-        let sink = McapSink::create(
+        let mut sink = McapSink::create(
             &path,
             meta,
             cfg.compression,
@@ -109,6 +121,7 @@ impl Recorder {
             cfg.chunk_size,
             cfg.depth_output,
         )?;
+        sink.live = live;
         let telemetry = Telemetry::new(cfg.queues);
         let health = RecorderHealth::default();
         let stop = Arc::new(AtomicBool::new(false));

@@ -14,6 +14,7 @@ use crate::msg::{
 use crate::topics;
 use foxglove::messages as fg;
 use foxglove::Encode;
+use hitl_hal::Intrinsics;
 use mcap::records::{MessageHeader, Metadata};
 use serde::Serialize;
 use std::collections::BTreeMap;
@@ -80,7 +81,7 @@ impl Ch {
         }
     }
 
-    fn schema(self) -> Result<(String, &'static str, Vec<u8>), RecordError> {
+    pub(crate) fn schema(self) -> Result<(String, &'static str, Vec<u8>), RecordError> {
         fn fox<T: Encode>() -> Result<(String, &'static str, Vec<u8>), RecordError> {
             let s = T::get_schema()
                 .ok_or_else(|| RecordError::Encode("foxglove schema missing".into()))?;
@@ -120,9 +121,11 @@ pub(crate) struct McapSink {
     /// Message payload bytes handed to the writer (before compression).
     pub bytes_in: u64,
     depth_output: DepthOutput,
+    /// The live view's tap (`hitl run --live`): every message written is offered to it.
+    pub live: Option<crate::live::LiveTap>,
 }
 
-fn ts(ns: u64) -> Option<fg::Timestamp> {
+pub(crate) fn ts(ns: u64) -> Option<fg::Timestamp> {
     let sec = u32::try_from(ns / 1_000_000_000).unwrap_or(u32::MAX);
     Some(fg::Timestamp::new(sec, (ns % 1_000_000_000) as u32))
 }
@@ -209,6 +212,7 @@ impl McapSink {
             buf: Vec::with_capacity(4096),
             bytes_in: 0,
             depth_output,
+            live: None,
         })
     }
 
@@ -226,6 +230,9 @@ impl McapSink {
         )?;
         self.written[i] += 1;
         self.bytes_in += data.len() as u64;
+        if let Some(live) = &self.live {
+            live.offer(ch, log_time, data);
+        }
         Ok(())
     }
 
@@ -349,20 +356,11 @@ impl McapSink {
     /// description of what was malformed (and skipped), if anything.
     pub fn frame(&mut self, f: FrameRecord) -> Result<Option<String>, RecordError> {
         let t = f.capture_ns;
+        if let Some(live) = &mut self.live {
+            live.frame(&f);
+        }
         let mut bad = Vec::new();
-        let i = f.intrinsics;
-        let cal = fg::CameraCalibration {
-            timestamp: ts(t),
-            frame_id: topics::FRAME_CAMERA.to_string(),
-            width: i.width,
-            height: i.height,
-            distortion_model: "plumb_bob".to_string(),
-            d: vec![0.0; 5],
-            k: vec![i.fx, 0.0, i.cx, 0.0, i.fy, i.cy, 0.0, 0.0, 1.0],
-            r: vec![1.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 1.0],
-            p: vec![i.fx, 0.0, i.cx, 0.0, 0.0, i.fy, i.cy, 0.0, 0.0, 0.0, 1.0, 0.0],
-        };
-        self.proto(Ch::Calibration, t, &cal)?;
+        self.proto(Ch::Calibration, t, &calibration(&f.intrinsics, t, 1))?;
         if let Some(trigger_ns) = f.trigger_ns {
             self.json(Ch::CaptureSync, t, &CaptureSyncMsg::new(f.tick, trigger_ns, t))?;
         }
@@ -439,6 +437,25 @@ impl McapSink {
             .map_err(|e| RecordError::Io { path: "recording".into(), source: e.into_error() })?;
         file.sync_all().map_err(|e| RecordError::Io { path: "recording".into(), source: e })?;
         Ok(())
+    }
+}
+
+/// The calibration of a registered stream (no distortion, R = I) at time `t`, for its image
+/// shrunk by a whole `factor` (1: as captured; pixel centres map as (c + 0.5) / factor - 0.5).
+pub(crate) fn calibration(i: &Intrinsics, t: u64, factor: u32) -> fg::CameraCalibration {
+    let s = f64::from(factor.max(1));
+    let (fx, fy) = (i.fx / s, i.fy / s);
+    let (cx, cy) = ((i.cx + 0.5) / s - 0.5, (i.cy + 0.5) / s - 0.5);
+    fg::CameraCalibration {
+        timestamp: ts(t),
+        frame_id: topics::FRAME_CAMERA.to_string(),
+        width: i.width / factor.max(1),
+        height: i.height / factor.max(1),
+        distortion_model: "plumb_bob".to_string(),
+        d: vec![0.0; 5],
+        k: vec![fx, 0.0, cx, 0.0, fy, cy, 0.0, 0.0, 1.0],
+        r: vec![1.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 1.0],
+        p: vec![fx, 0.0, cx, 0.0, 0.0, fy, cy, 0.0, 0.0, 0.0, 1.0, 0.0],
     }
 }
 

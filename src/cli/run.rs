@@ -11,9 +11,11 @@ use crate::exit;
 use crate::rt::RtOptions;
 use hitl_drivers::light::LightSpec;
 use hitl_perception::BackendSpec;
-use hitl_record::{ChunkCompression, RecorderConfig};
+use hitl_record::live::DEFAULT_LIVE_ADDR;
+use hitl_record::{ChunkCompression, LiveConfig, RecorderConfig};
 use hitl_trajectories::lab::LabConfig;
 use std::io::{BufRead, IsTerminal, Write};
+use std::net::{IpAddr, SocketAddr};
 use std::path::PathBuf;
 use std::time::Duration;
 
@@ -98,6 +100,27 @@ pub struct RunArgs {
     /// Print plain progress lines even on a terminal.
     #[arg(long)]
     pub plain: bool,
+    /// Stream the run live to Foxglove (WebSocket, docs/live.md) on ADDR, IP:PORT or IP
+    /// (default 127.0.0.1:8765). Write it after the trajectory, or as --live=ADDR. Loopback only
+    /// unless --allow-remote. The recorder feeds it: without --record the run is recorded to
+    /// runs/run-<time>.mcap, as `hitl record` does.
+    #[arg(long, value_name = "ADDR", num_args = 0..=1,
+          default_missing_value = "127.0.0.1:8765", value_parser = parse_live_addr)]
+    pub live: Option<SocketAddr>,
+    /// Allow a non-loopback --live address (the live view then answers anyone on that network).
+    #[arg(long)]
+    pub allow_remote: bool,
+}
+
+fn parse_live_addr(s: &str) -> Result<SocketAddr, String> {
+    s.parse::<SocketAddr>()
+        .or_else(|_| s.parse::<IpAddr>().map(|ip| SocketAddr::new(ip, DEFAULT_LIVE_ADDR.port())))
+        .map_err(|_| {
+            format!(
+                "'{s}' is not an address (IP:PORT or IP; write the trajectory before --live, or \
+                 --live=ADDR)"
+            )
+        })
 }
 
 fn parse_size(s: &str) -> Result<(u32, u32), String> {
@@ -139,6 +162,13 @@ pub fn run(args: RunArgs, record: bool) -> u8 {
             return exit::BAD_INPUT;
         }
     };
+    if let Some(addr) = args.live.filter(|a| !a.ip().is_loopback() && !args.allow_remote) {
+        crate::errln!(
+            "hitl run: refusing to serve the live view on {addr}: not loopback (add --allow-remote \
+             to mean it); nothing moved"
+        );
+        return exit::BAD_INPUT;
+    }
     let lab = match &args.config {
         Some(path) => match LabConfig::load(path) {
             Ok(lab) => lab,
@@ -180,6 +210,8 @@ pub fn run(args: RunArgs, record: bool) -> u8 {
     let record = match (&args.record, record) {
         (Some(path), _) => Some(path.clone()),
         (None, true) => Some(default_record_path()),
+        // The live view is fed by the recorder.
+        (None, false) if args.live.is_some() => Some(default_record_path()),
         (None, false) => None,
     };
     let stub_lab = match &args.stub_config {
@@ -221,6 +253,7 @@ pub fn run(args: RunArgs, record: bool) -> u8 {
             spin: Duration::from_micros(args.spin_us),
         },
         plain_progress: args.plain || !std::io::stderr().is_terminal(),
+        live: args.live.map(LiveConfig::new),
     };
     match session::run(request) {
         Ok(report) => {

@@ -8,7 +8,8 @@ use crate::devices::RunCamera;
 use hitl_hal::RgbdCamera as _;
 use hitl_perception::BackendSpec;
 use hitl_record::{
-    Recorder, RecorderConfig, RecorderHandle, RunMetadata, SunPhaseTrack, Telemetry,
+    LiveServer, LiveTap, Recorder, RecorderConfig, RecorderHandle, RunMetadata, SunPhaseTrack,
+    Telemetry,
 };
 use hitl_trajectories::Trajectory;
 use sha2::Digest as _;
@@ -48,6 +49,7 @@ pub(super) fn start_recorder(
     req: &RunRequest,
     traj: &Trajectory,
     scale: f64,
+    live: Option<LiveTap>,
 ) -> Result<Option<(RecorderHandle, Telemetry)>, RunError> {
     let Some(path) = &req.record else { return Ok(None) };
     if let Some(dir) = path.parent().filter(|d| !d.as_os_str().is_empty()) {
@@ -99,9 +101,30 @@ pub(super) fn start_recorder(
     };
     let config =
         RecorderConfig { compression: req.record_compression, ..RecorderConfig::default() };
-    Recorder::spawn_with(path, &meta, config)
+    Recorder::spawn_live(path, &meta, config, live)
         .map(Some)
         .map_err(|e| RunError::BadInput(format!("cannot record to {}: {e}", path.display())))
+}
+
+/// Start the live view, when asked (`--live`): listening before the arm is connected, so a port
+/// in use fails the run (exit 5) before anything moves. Its tap goes to the recorder.
+pub(super) fn start_live(
+    req: &RunRequest,
+    runtime: &tokio::runtime::Runtime,
+) -> Result<(Option<LiveServer>, Option<LiveTap>), RunError> {
+    let Some(cfg) = req.live else { return Ok((None, None)) };
+    if req.record.is_none() {
+        return Err(RunError::BadInput(
+            "--live needs the run recorded (the recorder feeds it)".into(),
+        ));
+    }
+    let (server, tap) =
+        LiveServer::start(cfg, runtime.handle()).map_err(|e| RunError::Device(e.to_string()))?;
+    crate::errln!(
+        "live view: ws://{} (Foxglove: Open connection, Foxglove WebSocket)",
+        server.addr()
+    );
+    Ok((Some(server), Some(tap)))
 }
 
 /// `--perception` as the operator wrote it.

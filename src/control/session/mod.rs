@@ -37,7 +37,9 @@ use crate::devices::{self as run_devices, CameraSpec, DeviceChoice, DeviceError,
 use crate::exit;
 use crate::rt::{self, slot::LatestSlot, slot::SlotReader, RtOptions};
 use arm_link::{connect_reports, first_report, resolve, spawn_report_reader};
-use devices::{collect_late_frames, record_pose, start_recorder, target_scene, TargetScene};
+use devices::{
+    collect_late_frames, record_pose, start_live, start_recorder, target_scene, TargetScene,
+};
 use hitl_hal::{Arm, ArmState, Joints, MonotonicClock};
 use hitl_perception::{backend_from_spec, spawn_worker, BackendSpec, ReregisterPolicy};
 use hitl_record::{
@@ -117,6 +119,8 @@ pub struct RunRequest {
     pub stub_lab: Option<LabConfig>,
     pub rt: RtOptions,
     pub plain_progress: bool,
+    /// Stream the run to Foxglove (`--live`; needs `record`: the recorder feeds it).
+    pub live: Option<hitl_record::LiveConfig>,
 }
 
 /// A run that could not start (nothing moved), or a device that failed before the loop.
@@ -172,6 +176,8 @@ pub struct RunReport {
     pub device_faults: Vec<String>,
     /// After a trip: whether a report confirmed the box's stop (state 4).
     pub box_stop: Option<StopConfirmation>,
+    /// What the live view did (`--live`).
+    pub live: Option<hitl_record::LiveSummary>,
 }
 
 impl RunReport {
@@ -208,6 +214,12 @@ impl RunReport {
                 self.intake.sync_error_mean_ns / 1e6,
                 self.intake.sync_error_max_ns as f64 / 1e6,
                 self.estimates
+            ));
+        }
+        if let Some(l) = &self.live {
+            s.push_str(&format!(
+                "\nlive view ws://{}: {} viewer(s), {} messages sent ({} images), live dropped {}",
+                l.addr, l.viewers, l.sent, l.images, l.dropped
             ));
         }
         for fault in &self.device_faults {
@@ -398,6 +410,7 @@ struct CapturePath {
     estimates: Option<tokio::task::JoinHandle<u64>>,
     intake: Intake,
     queues: Arc<IntakeQueues>,
+    live: Option<hitl_record::LiveServer>,
 }
 
 /// What closing the capture path gave.
@@ -405,6 +418,7 @@ struct ClosedCapture {
     intake: IntakeStats,
     estimates: u64,
     record_summary: Option<Result<(), String>>,
+    live: Option<hitl_record::LiveSummary>,
 }
 
 impl CapturePath {
@@ -414,7 +428,8 @@ impl CapturePath {
         scene: &TargetScene,
         runtime: &tokio::runtime::Runtime,
     ) -> Result<Self, RunError> {
-        let recorder = start_recorder(req, traj, scene.scale)?;
+        let (live, tap) = start_live(req, runtime)?;
+        let recorder = start_recorder(req, traj, scene.scale, tap)?;
         let (recorder, record) = match recorder {
             Some((h, t)) => (Some(h), Some(t)),
             None => (None, None),
@@ -461,7 +476,7 @@ impl CapturePath {
             IntakeOutputs { record: record.clone(), perception: perception.clone() },
         )
         .map_err(|e| RunError::Device(format!("capture intake thread: {e}")))?;
-        Ok(Self { recorder, record, perception, estimates, intake, queues })
+        Ok(Self { recorder, record, perception, estimates, intake, queues, live })
     }
 
     /// Drain the intake, let perception finish, write the run's last event and close the file.
@@ -492,7 +507,9 @@ impl CapturePath {
         }
         let record_summary =
             self.recorder.map(|handle| handle.finish().map(|_| ()).map_err(|e| e.to_string()));
-        ClosedCapture { intake, estimates, record_summary }
+        // After the recorder: its tap is gone, so the live view's hand-off has ended.
+        let live = self.live.map(hitl_record::LiveServer::close);
+        ClosedCapture { intake, estimates, record_summary, live }
     }
 }
 
@@ -721,5 +738,6 @@ fn report(
         record_error: closed.record_summary.and_then(|r| r.err()),
         device_faults,
         box_stop: None,
+        live: closed.live,
     }
 }
