@@ -1,10 +1,16 @@
-//! `hitl report RUN.mcap [--out DIR]`: summary JSON, plots and an index.html for one run.
+//! `hitl report RUN.mcap [--out DIR]`: summary JSON, plots, a contact sheet and an index.html
+//! for one run. This is where the report meets the perception crate: the contact sheet's target
+//! model is the run's (`target_model` and `scale` of its metadata, scaled as the run scaled it).
 
 use crate::exit;
-use hitl_record::report::{default_out_dir, write_report, ReportError};
+use hitl_record::report::{
+    default_out_dir, write_report_with, ContactOptions, ReportError, ReportOptions, TargetMesh,
+};
+use std::collections::BTreeMap;
 use std::path::PathBuf;
 
-/// Write a report of a recording: summary.json, SVG plots and index.html.
+/// Write a report of a recording: summary.json, SVG plots, a contact sheet (a few captures with
+/// the target's ground-truth and estimated silhouettes outlined) and index.html.
 #[derive(Debug, clap::Args)]
 pub struct ReportArgs {
     /// The recording (MCAP) to report on; a file cut short by a crash is read up to its last
@@ -16,11 +22,39 @@ pub struct ReportArgs {
     /// Print the summary as one JSON object.
     #[arg(long)]
     pub json: bool,
+    /// Captures on the contact sheet (evenly spread over the run; 0: no sheet).
+    #[arg(long, default_value_t = 8)]
+    pub contact_frames: usize,
+    /// Contact sheet frames wider than this are shrunk to it (pixels, at least 16).
+    #[arg(long, default_value_t = 480, value_parser = clap::value_parser!(u32).range(16..))]
+    pub contact_width: u32,
+}
+
+/// The run's target model in lab metres, as `hitl run` and `hitl eval` build it: the `target_model`
+/// of the run metadata (default asymmetric) scaled by its `scale`.
+fn run_target(run: &BTreeMap<String, String>) -> Result<TargetMesh, String> {
+    let spec = run.get("target_model").map_or("asymmetric", String::as_str);
+    let scale = run
+        .get("scale")
+        .ok_or("the run metadata has no `scale`")?
+        .parse::<f64>()
+        .map_err(|e| format!("run metadata `scale`: {e}"))?;
+    let model =
+        hitl_perception::TargetModel::from_spec(spec).map_err(|e| format!("{spec}: {e}"))?;
+    let mesh = model.lab_mesh(scale).map_err(|e| format!("{spec}: {e}"))?;
+    Ok(TargetMesh { vertices: mesh.vertices().to_vec(), faces: mesh.faces().to_vec() })
 }
 
 pub fn run(args: ReportArgs) -> u8 {
     let dir = args.out.clone().unwrap_or_else(|| default_out_dir(&args.recording));
-    match write_report(&args.recording, Some(&dir)) {
+    let opts = ReportOptions {
+        contact: ContactOptions {
+            frames: args.contact_frames,
+            max_width: args.contact_width,
+            model: Some(&run_target),
+        },
+    };
+    match write_report_with(&args.recording, Some(&dir), &opts) {
         Ok(r) => {
             if let Some(w) = nominal_hitl_warning(&args.recording) {
                 crate::errln!("hitl report: warning: {w}");

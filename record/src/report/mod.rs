@@ -1,11 +1,14 @@
-//! `hitl report`: a summary JSON, SVG plots and an `index.html` for one recording.
+//! `hitl report`: a summary JSON, SVG plots, a contact sheet and an `index.html` for one
+//! recording.
 
+pub mod contact;
 pub mod plots;
 pub mod summary;
 
 use crate::reader::{read_recording, Recording};
 use std::path::{Path, PathBuf};
 
+pub use contact::{ContactOptions, ContactSheet, ModelSource, TargetMesh};
 pub use summary::{summarize, Summary};
 
 /// Why a report could not be written.
@@ -24,8 +27,14 @@ pub enum ReportError {
 pub struct ReportOutput {
     pub dir: PathBuf,
     pub summary: Summary,
-    /// Every file written (summary.json, plots, index.html).
+    /// Every file written (summary.json, plots, the contact sheet's PNGs, index.html).
     pub files: Vec<PathBuf>,
+}
+
+/// What goes into a report beyond what the recording says by itself.
+#[derive(Clone, Copy, Default)]
+pub struct ReportOptions<'a> {
+    pub contact: ContactOptions<'a>,
 }
 
 /// The default output folder: `RUN_report/` next to `RUN.mcap`.
@@ -35,19 +44,34 @@ pub fn default_out_dir(mcap: &Path) -> PathBuf {
     mcap.with_file_name(format!("{stem}_report"))
 }
 
-fn io(path: &Path) -> impl FnOnce(std::io::Error) -> ReportError + '_ {
+pub(crate) fn io(path: &Path) -> impl FnOnce(std::io::Error) -> ReportError + '_ {
     move |e| ReportError::Io { path: path.display().to_string(), source: e }
 }
 
 type PlotFn = fn(&Recording, &Path) -> Result<(), String>;
 
-/// Read `mcap` and write the report into `out_dir` (default: [`default_out_dir`]).
+/// Read `mcap` and write the report into `out_dir` (default: [`default_out_dir`]); the contact
+/// sheet has no target model, so it shows the recorded masks only.
 pub fn write_report(mcap: &Path, out_dir: Option<&Path>) -> Result<ReportOutput, ReportError> {
+    write_report_with(mcap, out_dir, &ReportOptions::default())
+}
+
+/// [`write_report`] with options (the target model for the contact sheet's silhouettes).
+pub fn write_report_with(
+    mcap: &Path,
+    out_dir: Option<&Path>,
+    opts: &ReportOptions<'_>,
+) -> Result<ReportOutput, ReportError> {
     let rec = read_recording(mcap)?;
     let dir = out_dir.map(Path::to_path_buf).unwrap_or_else(|| default_out_dir(mcap));
     std::fs::create_dir_all(&dir).map_err(io(&dir))?;
-    let summary = summarize(&rec);
+    let mut summary = summarize(&rec);
     let mut files = Vec::new();
+    if opts.contact.frames > 0 {
+        let (sheet, pngs) = contact::write_contact_sheet(mcap, &rec, &dir, &opts.contact)?;
+        summary.contact_sheet = Some(sheet);
+        files.extend(pngs);
+    }
     let sj = dir.join("summary.json");
     let text = serde_json::to_string_pretty(&summary)
         .map_err(|e| ReportError::Io { path: sj.display().to_string(), source: e.into() })?;
@@ -89,7 +113,7 @@ fn index_html(mcap: &Path, s: &Summary, plots: &[(&str, &str)]) -> String {
     let mut h = String::new();
     let name = esc(&mcap.display().to_string());
     h.push_str(&format!(
-        "<!doctype html>\n<html><head><meta charset=\"utf-8\"><title>hitl report: {name}</title>\n<style>body{{font-family:sans-serif;margin:2em;max-width:1150px}}table{{border-collapse:collapse}}td,th{{border:1px solid #ccc;padding:3px 8px;text-align:left}}.bad{{color:#b00}}img{{max-width:100%;border:1px solid #eee;margin:8px 0}}</style></head><body>\n<h1>hitl run report</h1>\n<p>{name}</p>\n"
+        "<!doctype html>\n<html><head><meta charset=\"utf-8\"><title>hitl report: {name}</title>\n<style>body{{font-family:sans-serif;margin:2em;max-width:1150px}}table{{border-collapse:collapse}}td,th{{border:1px solid #ccc;padding:3px 8px;text-align:left}}.bad{{color:#b00}}img{{max-width:100%;border:1px solid #eee;margin:8px 0}}.sheet{{display:grid;grid-template-columns:repeat(auto-fill,minmax(360px,1fr));gap:10px}}.sheet figure{{margin:0}}.sheet img{{width:100%;height:auto;image-rendering:pixelated;margin:0}}.sheet figcaption{{font-size:90%}}.sw{{display:inline-block;width:1.6em;height:0.35em;vertical-align:middle;margin:0 0.4em 0 1em}}</style></head><body>\n<h1>hitl run report</h1>\n<p>{name}</p>\n"
     ));
     let state = if s.complete {
         "closed cleanly".to_string()
@@ -136,6 +160,9 @@ fn index_html(mcap: &Path, s: &Summary, plots: &[(&str, &str)]) -> String {
         if s.frames_not_recorded > 0 { " class=\"bad\"" } else { "" },
         s.frames_not_recorded
     ));
+    if let Some(sheet) = &s.contact_sheet {
+        contact_html(&mut h, sheet);
+    }
     h.push_str("<h2>Safety events</h2>\n");
     if s.events.is_empty() {
         h.push_str("<p>none</p>\n");
@@ -165,4 +192,55 @@ fn index_html(mcap: &Path, s: &Summary, plots: &[(&str, &str)]) -> String {
     }
     h.push_str("</table>\n<p><a href=\"summary.json\">summary.json</a></p>\n</body></html>\n");
     h
+}
+
+fn hex(c: [u8; 3]) -> String {
+    format!("#{:02x}{:02x}{:02x}", c[0], c[1], c[2])
+}
+
+/// The contact sheet's section: legend, one captioned figure per capture, and its notes.
+fn contact_html(h: &mut String, sheet: &ContactSheet) {
+    use contact::{GroundTruthSource, ESTIMATE_COLOUR, GROUND_TRUTH_COLOUR};
+    h.push_str("<h2>Contact sheet</h2>\n");
+    if !sheet.frames.is_empty() {
+        h.push_str(&format!(
+            "<p>{} of {} captures, evenly spread. Outlines: <span class=\"sw\" style=\"background:{}\"></span>ground truth (the recorded mask; the target model at the ground-truth pose where no mask was recorded) <span class=\"sw\" style=\"background:{}\"></span>estimate (the target model at the estimated pose; drawn over the ground truth where they meet). e_t is the estimate's translation error in real metres (lab millimetres without a recorded scale), e_r its rotation error as recorded; <code>hitl eval</code> gives the paper's calibrated figures.</p>\n<div class=\"sheet\">\n",
+            sheet.frames.len(),
+            sheet.captures,
+            hex(GROUND_TRUTH_COLOUR),
+            hex(ESTIMATE_COLOUR)
+        ));
+        for f in &sheet.frames {
+            let mut cap = format!("capture {} &middot; t {:.2} s", f.capture, f.t_s);
+            match (f.et_m, f.et_lab_mm, f.er_deg) {
+                (Some(et), _, Some(er)) => {
+                    cap.push_str(&format!(" &middot; e_t {et:.3} m &middot; e_r {er:.2}&deg;"))
+                }
+                (None, Some(mm), Some(er)) => cap
+                    .push_str(&format!(" &middot; e_t {mm:.1} mm (lab) &middot; e_r {er:.2}&deg;")),
+                _ => cap.push_str(" &middot; no estimate"),
+            }
+            match f.ground_truth {
+                Some(GroundTruthSource::Mask) => {}
+                Some(GroundTruthSource::Model) => {
+                    cap.push_str(" &middot; ground truth from the model")
+                }
+                None => cap.push_str(" &middot; no ground truth"),
+            }
+            if f.et_lab_mm.is_some() && !f.estimate {
+                cap.push_str(" (no model to draw it)");
+            }
+            h.push_str(&format!(
+                "<figure><img src=\"{}\" alt=\"capture {}\" width=\"{}\" height=\"{}\"><figcaption>{cap}</figcaption></figure>\n",
+                esc(&f.file),
+                f.capture,
+                f.width,
+                f.height
+            ));
+        }
+        h.push_str("</div>\n");
+    }
+    for n in &sheet.notes {
+        h.push_str(&format!("<p>{}</p>\n", esc(n)));
+    }
 }

@@ -91,6 +91,9 @@ pub struct Summary {
     pub events: Vec<EventLine>,
     pub trajectory_sha256: Option<String>,
     pub scale: Option<String>,
+    /// The captures on the report's contact sheet (set by the report, not by [`summarize`]).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub contact_sheet: Option<crate::report::contact::ContactSheet>,
 }
 
 /// Time origin of the run: earliest stamp of the loop's topics.
@@ -235,5 +238,6 @@ pub fn summarize(rec: &Recording) -> Summary {
             .collect(),
         trajectory_sha256: run.and_then(|m| m.get("trajectory_sha256").cloned()),
         scale: run.and_then(|m| m.get("scale").cloned()),
+        contact_sheet: None,
     }
 }

@@ -1,0 +1,659 @@
+//! The report's contact sheet: a few captures, evenly spread over the run, with the target's
+//! ground-truth and estimated silhouettes outlined over the camera image (the paper's overlay
+//! figure).
+//!
+//! Ground truth is the recorded `/camera/mask` when the run recorded one, else the target model
+//! projected at `/pose/gt`; the estimate is the target model projected at `/pose/estimate`. This
+//! crate does not know the perception crate's target models: the caller hands in a
+//! [`ModelSource`] that turns the run's metadata into a [`TargetMesh`] (lab metres, in the
+//! target's frame, scaled as the run scaled it). Frames wider than
+//! [`ContactOptions::max_width`] are shrunk with a box filter, and the silhouettes are rasterised
+//! at the shrunk size with the intrinsics scaled to it, so an outline is one sheet pixel wide.
+//!
+//! Pixel convention (the simulated camera's and the tracker's): pixel `(x, y)` is centred on
+//! image coordinate `(x, y)`, and a pixel belongs to a silhouette when its centre lies in a
+//! projected triangle.
+
+use super::summary::{secs, t0};
+use super::ReportError;
+use crate::msg::Pose;
+use crate::reader::{decode_image, depth_metres, visit, Recording};
+use crate::topics;
+use foxglove::messages as fg;
+use hitl_hal::Intrinsics;
+use serde::Serialize;
+use std::collections::{BTreeMap, HashMap};
+use std::ops::ControlFlow;
+use std::path::{Path, PathBuf};
+
+/// Outline colour of the ground-truth silhouette (rgb8).
+pub const GROUND_TRUTH_COLOUR: [u8; 3] = [0, 255, 0];
+/// Outline colour of the estimated silhouette (rgb8); drawn over the ground truth's.
+pub const ESTIMATE_COLOUR: [u8; 3] = [255, 0, 255];
+/// Sub-folder of the report that holds the sheet's PNGs.
+pub const CONTACT_DIR: &str = "contact";
+/// Triangles with a vertex closer to the camera than this (metres, along its axis) are not drawn.
+const NEAR_M: f64 = 1e-3;
+
+/// A target's triangle mesh in its own frame, lab metres (as the run scaled it).
+#[derive(Debug, Clone, PartialEq, Default)]
+pub struct TargetMesh {
+    pub vertices: Vec<[f64; 3]>,
+    pub faces: Vec<[u32; 3]>,
+}
+
+/// Turns the run's `run` metadata record (empty when it has none) into the target's mesh, or
+/// says why it cannot.
+pub type ModelSource<'a> = &'a dyn Fn(&BTreeMap<String, String>) -> Result<TargetMesh, String>;
+
+/// What the sheet shows.
+#[derive(Clone, Copy)]
+pub struct ContactOptions<'a> {
+    /// Captures on the sheet (evenly spread over the recorded ones, first and last included).
+    pub frames: usize,
+    /// Frames wider than this many pixels are shrunk to it.
+    pub max_width: u32,
+    /// The target model, for the estimated silhouette (and the ground truth without a mask).
+    pub model: Option<ModelSource<'a>>,
+}
+
+impl Default for ContactOptions<'_> {
+    fn default() -> Self {
+        ContactOptions { frames: 8, max_width: 480, model: None }
+    }
+}
+
+/// Where a frame's ground-truth silhouette came from.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize)]
+#[serde(rename_all = "snake_case")]
+pub enum GroundTruthSource {
+    /// The recorded `/camera/mask`.
+    Mask,
+    /// The target model projected at the `/pose/gt` pose.
+    Model,
+}
+
+/// One capture on the sheet.
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct ContactFrame {
+    /// Index among the recorded captures (0-based, capture order).
+    pub capture: usize,
+    pub capture_ns: u64,
+    /// Seconds from the run's start.
+    pub t_s: f64,
+    /// The PNG, relative to the report folder.
+    pub file: String,
+    pub width: u32,
+    pub height: u32,
+    pub ground_truth: Option<GroundTruthSource>,
+    /// An estimated silhouette is drawn.
+    pub estimate: bool,
+    /// Translation error of the recorded estimate, lab millimetres.
+    pub et_lab_mm: Option<f64>,
+    /// The same in real metres (lab / the run's scale), when the run recorded its scale.
+    pub et_m: Option<f64>,
+    /// Rotation error of the recorded estimate, degrees, as recorded (`hitl eval` calibrates
+    /// rotation on the first frame, as the paper does; this does not).
+    pub er_deg: Option<f64>,
+    /// Intersection over union of the estimated and ground-truth silhouettes (sheet pixels).
+    pub estimate_iou: Option<f64>,
+    /// Intersection over union of the model at the ground-truth pose and the recorded mask: how
+    /// well model, scale and intrinsics explain the images (parts hidden by the stand lower it).
+    pub model_mask_iou: Option<f64>,
+}
+
+/// The sheet as written (the `contact_sheet` of summary.json).
+#[derive(Debug, Clone, Default, PartialEq, Serialize)]
+pub struct ContactSheet {
+    /// Captures the recording holds.
+    pub captures: usize,
+    pub frames: Vec<ContactFrame>,
+    /// Why something is missing (no camera frames, no model, an unreadable image).
+    pub notes: Vec<String>,
+}
+
+/// A binary image: which pixels belong to the target.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct Silhouette {
+    pub width: u32,
+    pub height: u32,
+    /// Row-major.
+    pub inside: Vec<bool>,
+}
+
+impl Silhouette {
+    pub fn empty(width: u32, height: u32) -> Silhouette {
+        Silhouette { width, height, inside: vec![false; width as usize * height as usize] }
+    }
+
+    /// From a mono8 mask (non-zero: target).
+    pub fn from_mono8(width: u32, height: u32, data: &[u8]) -> Option<Silhouette> {
+        (data.len() == width as usize * height as usize).then(|| Silhouette {
+            width,
+            height,
+            inside: data.iter().map(|&v| v != 0).collect(),
+        })
+    }
+
+    pub fn get(&self, x: u32, y: u32) -> bool {
+        x < self.width && y < self.height && self.inside[(y * self.width + x) as usize]
+    }
+
+    pub fn area(&self) -> usize {
+        self.inside.iter().filter(|&&v| v).count()
+    }
+
+    /// The outline: pixels of the silhouette with a 4-neighbour (inside the image) that is not.
+    /// A silhouette cut by the image border is not outlined along it.
+    pub fn outline(&self) -> Silhouette {
+        let (w, h) = (self.width, self.height);
+        let mut out = Silhouette::empty(w, h);
+        for y in 0..h {
+            for x in 0..w {
+                if !self.get(x, y) {
+                    continue;
+                }
+                let off = |dx: i64, dy: i64| {
+                    let (nx, ny) = (i64::from(x) + dx, i64::from(y) + dy);
+                    nx >= 0
+                        && ny >= 0
+                        && nx < i64::from(w)
+                        && ny < i64::from(h)
+                        && !self.get(nx as u32, ny as u32)
+                };
+                if off(-1, 0) || off(1, 0) || off(0, -1) || off(0, 1) {
+                    out.inside[(y * w + x) as usize] = true;
+                }
+            }
+        }
+        out
+    }
+
+    /// Intersection over union (`None` when sizes differ or both are empty).
+    pub fn iou(&self, other: &Silhouette) -> Option<f64> {
+        if (self.width, self.height) != (other.width, other.height) {
+            return None;
+        }
+        let (mut i, mut u) = (0usize, 0usize);
+        for (a, b) in self.inside.iter().zip(&other.inside) {
+            i += usize::from(*a && *b);
+            u += usize::from(*a || *b);
+        }
+        (u > 0).then(|| i as f64 / u as f64)
+    }
+}
+
+/// The target's silhouette: `mesh` placed at `camera_T_target` = `pose` (OpenCV camera axes),
+/// projected with the pinhole `k` and filled triangle by triangle (scanlines through pixel
+/// centres). Triangles reaching behind the camera's near plane are left out.
+pub fn rasterize(mesh: &TargetMesh, pose: &Pose, k: &Intrinsics) -> Silhouette {
+    let mut s = Silhouette::empty(k.width, k.height);
+    let iso = pose.isometry();
+    let projected: Vec<Option<[f64; 2]>> = mesh
+        .vertices
+        .iter()
+        .map(|v| {
+            let p = iso.transform_point(&nalgebra::Point3::from(*v));
+            let (u, w) = (k.fx * p.x / p.z + k.cx, k.fy * p.y / p.z + k.cy);
+            (p.z > NEAR_M && u.is_finite() && w.is_finite()).then_some([u, w])
+        })
+        .collect();
+    for f in &mesh.faces {
+        let corner = |i: u32| projected.get(i as usize).copied().flatten();
+        if let (Some(a), Some(b), Some(c)) = (corner(f[0]), corner(f[1]), corner(f[2])) {
+            fill_triangle(&mut s, [a, b, c]);
+        }
+    }
+    s
+}
+
+/// Sets the pixels whose centres lie in the triangle (edges included).
+fn fill_triangle(s: &mut Silhouette, t: [[f64; 2]; 3]) {
+    if s.width == 0 || s.height == 0 {
+        return;
+    }
+    let vmin = t.iter().map(|p| p[1]).fold(f64::INFINITY, f64::min);
+    let vmax = t.iter().map(|p| p[1]).fold(f64::NEG_INFINITY, f64::max);
+    let y0 = vmin.ceil().max(0.0);
+    let y1 = vmax.floor().min(f64::from(s.height - 1));
+    if y0 > y1 {
+        return;
+    }
+    for y in y0 as u32..=y1 as u32 {
+        let yf = f64::from(y);
+        let (mut xl, mut xr) = (f64::INFINITY, f64::NEG_INFINITY);
+        for (a, b) in [(t[0], t[1]), (t[1], t[2]), (t[2], t[0])] {
+            let (lo, hi) = if a[1] <= b[1] { (a, b) } else { (b, a) };
+            if yf < lo[1] || yf > hi[1] {
+                continue;
+            }
+            let xs = if hi[1] > lo[1] {
+                let x = lo[0] + (yf - lo[1]) * (hi[0] - lo[0]) / (hi[1] - lo[1]);
+                [x, x]
+            } else {
+                // A horizontal edge on this row: both its ends.
+                [lo[0], hi[0]]
+            };
+            for x in xs {
+                xl = xl.min(x);
+                xr = xr.max(x);
+            }
+        }
+        let x0 = xl.ceil().max(0.0);
+        let x1 = xr.floor().min(f64::from(s.width - 1));
+        if x0 > x1 {
+            continue;
+        }
+        let row = (y * s.width) as usize;
+        s.inside[row + x0 as usize..=row + x1 as usize].fill(true);
+    }
+}
+
+/// The sheet's size for a `width` x `height` frame: shrunk to `max_width` wide, aspect kept.
+pub fn sheet_size(width: u32, height: u32, max_width: u32) -> (u32, u32) {
+    if width <= max_width || width == 0 {
+        return (width, height);
+    }
+    let h = (u64::from(height) * u64::from(max_width) + u64::from(width) / 2) / u64::from(width);
+    (max_width.max(1), (h as u32).max(1))
+}
+
+/// `k` for the image shrunk to `width` x `height`: source pixel centre `x` lands on
+/// `(x + 0.5) * width / k.width - 0.5`, the box filter's bin of that pixel.
+pub fn scaled_intrinsics(k: &Intrinsics, width: u32, height: u32) -> Intrinsics {
+    let sx = f64::from(width) / f64::from(k.width.max(1));
+    let sy = f64::from(height) / f64::from(k.height.max(1));
+    Intrinsics {
+        width,
+        height,
+        fx: k.fx * sx,
+        fy: k.fy * sy,
+        cx: (k.cx + 0.5) * sx - 0.5,
+        cy: (k.cy + 0.5) * sy - 0.5,
+    }
+}
+
+/// Output bin of each source index: `floor((i + 0.5) * to / from)`.
+fn bins(from: u32, to: u32) -> Vec<usize> {
+    (0..u64::from(from))
+        .map(|i| (((2 * i + 1) * u64::from(to)) / (2 * u64::from(from))) as usize)
+        .map(|b| b.min(to.saturating_sub(1) as usize))
+        .collect()
+}
+
+/// Box-filter `channels`-channel u8 pixels from `w` x `h` to `ow` x `oh` (`ow <= w`, `oh <= h`).
+fn shrink_u8(src: &[u8], channels: usize, (w, h): (u32, u32), (ow, oh): (u32, u32)) -> Vec<u8> {
+    if (ow, oh) == (w, h) {
+        return src.to_vec();
+    }
+    let (bx, by) = (bins(w, ow), bins(h, oh));
+    let mut sum = vec![0u32; ow as usize * oh as usize * channels];
+    let mut count = vec![0u32; ow as usize * oh as usize];
+    for (y, oy) in by.iter().enumerate() {
+        for (x, ox) in bx.iter().enumerate() {
+            let o = oy * ow as usize + ox;
+            count[o] += 1;
+            let s = (y * w as usize + x) * channels;
+            for c in 0..channels {
+                sum[o * channels + c] += u32::from(src[s + c]);
+            }
+        }
+    }
+    sum.iter()
+        .enumerate()
+        .map(|(i, v)| {
+            let n = count[i / channels].max(1);
+            ((v + n / 2) / n) as u8
+        })
+        .collect()
+}
+
+/// Shrink a silhouette: an output pixel is inside when at least half its source pixels are.
+fn shrink_silhouette(s: &Silhouette, ow: u32, oh: u32) -> Silhouette {
+    let bytes: Vec<u8> = s.inside.iter().map(|&v| if v { 255 } else { 0 }).collect();
+    let small = shrink_u8(&bytes, 1, (s.width, s.height), (ow, oh));
+    Silhouette { width: ow, height: oh, inside: small.iter().map(|&v| v >= 128).collect() }
+}
+
+/// Rows of `img` without padding, `bpp` bytes per pixel; `None` when the buffer is too short.
+fn packed(img: &fg::RawImage, bpp: usize) -> Option<Vec<u8>> {
+    let (w, h) = (img.width as usize, img.height as usize);
+    let step = if img.step == 0 { w * bpp } else { img.step as usize };
+    if step < w * bpp || img.data.len() < step.checked_mul(h)? {
+        return None;
+    }
+    let mut out = Vec::with_capacity(w * h * bpp);
+    for row in 0..h {
+        out.extend_from_slice(&img.data[row * step..row * step + w * bpp]);
+    }
+    Some(out)
+}
+
+/// rgb8 pixels of a colour image (rgb8, bgr8 or mono8).
+fn rgb_of(img: &fg::RawImage) -> Option<Vec<u8>> {
+    match img.encoding.as_str() {
+        "rgb8" => packed(img, 3),
+        "bgr8" => Some(packed(img, 3)?.chunks_exact(3).flat_map(|p| [p[2], p[1], p[0]]).collect()),
+        "mono8" => Some(packed(img, 1)?.iter().flat_map(|&v| [v, v, v]).collect()),
+        _ => None,
+    }
+}
+
+/// A depth image as grey rgb8: near is bright, no return is black.
+fn depth_grey(img: &fg::RawImage) -> Option<Vec<u8>> {
+    let d = depth_metres(img)?;
+    let valid = d.iter().copied().filter(|v| v.is_finite() && *v > 0.0);
+    let (lo, hi) = valid.fold((f32::INFINITY, 0.0f32), |(lo, hi), v| (lo.min(v), hi.max(v)));
+    let span = (hi - lo).max(1e-6);
+    Some(
+        d.iter()
+            .flat_map(|&v| {
+                let g =
+                    if v.is_finite() && v > 0.0 { 255.0 - 200.0 * (v - lo) / span } else { 0.0 };
+                [g as u8; 3]
+            })
+            .collect(),
+    )
+}
+
+fn paint(rgb: &mut [u8], s: &Silhouette, colour: [u8; 3]) {
+    for (i, _) in s.inside.iter().enumerate().filter(|(_, v)| **v) {
+        rgb[i * 3..i * 3 + 3].copy_from_slice(&colour);
+    }
+}
+
+fn write_png(path: &Path, w: u32, h: u32, rgb: &[u8]) -> Result<(), std::io::Error> {
+    let file = std::io::BufWriter::new(std::fs::File::create(path)?);
+    let mut enc = png::Encoder::new(file, w, h);
+    enc.set_color(png::ColorType::Rgb);
+    enc.set_depth(png::BitDepth::Eight);
+    let mut writer = enc.write_header().map_err(std::io::Error::other)?;
+    writer.write_image_data(rgb).map_err(std::io::Error::other)?;
+    writer.finish().map_err(std::io::Error::other)
+}
+
+/// The pose of capture `t` in a list sorted by capture time.
+fn pose_at(list: &[crate::msg::PoseStamped], t: u64) -> Option<Pose> {
+    let i = list.partition_point(|p| p.capture_ns < t);
+    list.get(i).filter(|p| p.capture_ns == t).map(|p| p.pose)
+}
+
+/// Indices of `n` of `total` items, evenly spread, first and last included.
+fn spread(total: usize, n: usize) -> Vec<usize> {
+    let n = n.min(total);
+    match n {
+        0 => Vec::new(),
+        1 => vec![0],
+        _ => (0..n).map(|k| k * (total - 1) / (n - 1)).collect(),
+    }
+}
+
+#[derive(Default)]
+struct Pixels {
+    color: Option<fg::RawImage>,
+    depth: Option<fg::RawImage>,
+    mask: Option<fg::RawImage>,
+}
+
+/// Write the sheet's PNGs into `dir/contact/` (removing PNGs a previous report left there) and
+/// say what is on it. `rec` is `mcap` as [`crate::reader::read_recording`] read it.
+pub fn write_contact_sheet(
+    mcap: &Path,
+    rec: &Recording,
+    dir: &Path,
+    opts: &ContactOptions<'_>,
+) -> Result<(ContactSheet, Vec<PathBuf>), ReportError> {
+    let mut sheet = ContactSheet::default();
+    // First pass: the captures and their intrinsics, from the per-frame calibration.
+    let mut captures: Vec<(u64, Intrinsics)> = Vec::new();
+    let mut bad_calibration = 0usize;
+    visit(
+        mcap,
+        |m| {
+            if m.topic == topics::CALIBRATION {
+                match <fg::CameraCalibration as prost::Message>::decode(m.data) {
+                    Ok(c) if c.k.len() == 9 && c.width > 0 && c.height > 0 => {
+                        let k = Intrinsics {
+                            width: c.width,
+                            height: c.height,
+                            fx: c.k[0],
+                            fy: c.k[4],
+                            cx: c.k[2],
+                            cy: c.k[5],
+                        };
+                        captures.push((m.log_time, k));
+                    }
+                    _ => bad_calibration += 1,
+                }
+            }
+            ControlFlow::Continue(())
+        },
+        |_, _| {},
+    )?;
+    captures.sort_by_key(|c| c.0);
+    captures.dedup_by_key(|c| c.0);
+    sheet.captures = captures.len();
+    if bad_calibration > 0 {
+        sheet.notes.push(format!("{bad_calibration} unreadable /camera/calibration messages"));
+    }
+    if captures.is_empty() {
+        sheet.notes.push(
+            "this recording holds no camera frames (a run without a camera, or one stopped before \
+             its first capture): no contact sheet"
+                .to_string(),
+        );
+        return Ok((sheet, Vec::new()));
+    }
+
+    // Second pass: the pixels of the chosen captures only.
+    let chosen = spread(captures.len(), opts.frames);
+    let mut pixels: HashMap<u64, Pixels> =
+        chosen.iter().map(|&i| (captures[i].0, Pixels::default())).collect();
+    let mut bad_images = 0usize;
+    visit(
+        mcap,
+        |m| {
+            let slot = match m.topic {
+                topics::COLOR | topics::DEPTH | topics::MASK => pixels.get_mut(&m.log_time),
+                _ => None,
+            };
+            if let Some(p) = slot {
+                match decode_image(m.data) {
+                    Ok(img) => match m.topic {
+                        topics::COLOR => p.color = Some(img),
+                        topics::DEPTH => p.depth = Some(img),
+                        _ => p.mask = Some(img),
+                    },
+                    Err(_) => bad_images += 1,
+                }
+            }
+            ControlFlow::Continue(())
+        },
+        |_, _| {},
+    )?;
+    if bad_images > 0 {
+        sheet.notes.push(format!("{bad_images} images of the sheet's captures could not be read"));
+    }
+
+    let empty = BTreeMap::new();
+    let run = rec.metadata.get(topics::META_RUN).unwrap_or(&empty);
+    let model = match opts.model {
+        Some(source) => match source(run) {
+            Ok(m) => Some(m),
+            Err(e) => {
+                sheet.notes.push(format!("no model silhouettes (target model: {e})"));
+                None
+            }
+        },
+        None => {
+            sheet.notes.push("no target model given: no model silhouettes".to_string());
+            None
+        }
+    };
+    let scale = run.get("scale").and_then(|s| s.parse::<f64>().ok()).filter(|s| *s > 0.0);
+    let origin = match t0(rec) {
+        0 => captures[0].0,
+        t => t,
+    };
+
+    let out_dir = dir.join(CONTACT_DIR);
+    std::fs::create_dir_all(&out_dir).map_err(super::io(&out_dir))?;
+    clear_old_pngs(&out_dir)?;
+    let mut files = Vec::new();
+    for &i in &chosen {
+        let (t, k) = captures[i];
+        let px = pixels.remove(&t).unwrap_or_default();
+        let (w, h) = (k.width, k.height);
+        let (ow, oh) = sheet_size(w, h, opts.max_width);
+        let sized = |img: Option<fg::RawImage>| img.filter(|m| (m.width, m.height) == (w, h));
+        let (color, depth, mask) = (sized(px.color), sized(px.depth), sized(px.mask));
+        let background = color
+            .as_ref()
+            .and_then(rgb_of)
+            .or_else(|| depth.as_ref().and_then(depth_grey))
+            .unwrap_or_else(|| vec![0; w as usize * h as usize * 3]);
+        let mut rgb = shrink_u8(&background, 3, (w, h), (ow, oh));
+        let sk = scaled_intrinsics(&k, ow, oh);
+        let gt_pose = pose_at(&rec.pose_gt, t);
+        let est_pose = pose_at(&rec.pose_estimate, t);
+        let mask = mask
+            .filter(|m| m.encoding == "mono8")
+            .and_then(|m| Silhouette::from_mono8(w, h, &packed(&m, 1)?))
+            .map(|s| shrink_silhouette(&s, ow, oh));
+        let model_gt = model.as_ref().zip(gt_pose).map(|(m, p)| rasterize(m, &p, &sk));
+        let model_mask_iou = mask.as_ref().zip(model_gt.as_ref()).and_then(|(a, b)| a.iou(b));
+        let (gt, source) = match (mask, model_gt) {
+            (Some(m), _) => (Some(m), Some(GroundTruthSource::Mask)),
+            (None, Some(m)) => (Some(m), Some(GroundTruthSource::Model)),
+            (None, None) => (None, None),
+        };
+        let est = model.as_ref().zip(est_pose).map(|(m, p)| rasterize(m, &p, &sk));
+        if let Some(g) = &gt {
+            paint(&mut rgb, &g.outline(), GROUND_TRUTH_COLOUR);
+        }
+        if let Some(e) = &est {
+            paint(&mut rgb, &e.outline(), ESTIMATE_COLOUR);
+        }
+        let name = format!("{i:03}.png");
+        let path = out_dir.join(&name);
+        write_png(&path, ow, oh, &rgb)
+            .map_err(|e| ReportError::Io { path: path.display().to_string(), source: e })?;
+        files.push(path);
+        let errors = est_pose.zip(gt_pose).map(|(e, g)| (e.distance_to(&g), e.angle_to(&g)));
+        sheet.frames.push(ContactFrame {
+            capture: i,
+            capture_ns: t,
+            t_s: secs(t, origin),
+            file: format!("{CONTACT_DIR}/{name}"),
+            width: ow,
+            height: oh,
+            ground_truth: source,
+            estimate: est.is_some(),
+            et_lab_mm: errors.map(|e| e.0 * 1e3),
+            et_m: errors.zip(scale).map(|(e, s)| e.0 / s),
+            er_deg: errors.map(|e| e.1.to_degrees()),
+            estimate_iou: est.as_ref().zip(gt.as_ref()).and_then(|(a, b)| a.iou(b)),
+            model_mask_iou,
+        });
+    }
+    Ok((sheet, files))
+}
+
+/// Remove the `.png` files of an earlier sheet (fewer captures now would leave them behind).
+fn clear_old_pngs(dir: &Path) -> Result<(), ReportError> {
+    for entry in std::fs::read_dir(dir).map_err(super::io(dir))? {
+        let path = entry.map_err(super::io(dir))?.path();
+        if path.extension().is_some_and(|e| e == "png") && path.is_file() {
+            std::fs::remove_file(&path).map_err(super::io(&path))?;
+        }
+    }
+    Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn square(half: f64, z: f64) -> TargetMesh {
+        TargetMesh {
+            vertices: vec![[-half, -half, z], [half, -half, z], [half, half, z], [-half, half, z]],
+            faces: vec![[0, 1, 2], [0, 2, 3]],
+        }
+    }
+
+    fn k(w: u32, h: u32, f: f64) -> Intrinsics {
+        Intrinsics {
+            width: w,
+            height: h,
+            fx: f,
+            fy: f,
+            cx: (w as f64 - 1.0) / 2.0,
+            cy: (h as f64 - 1.0) / 2.0,
+        }
+    }
+
+    #[test]
+    fn a_square_fills_the_pixels_whose_centres_it_covers() {
+        // 20x10, f = 10, centre (9.5, 4.5); a square of half-size 0.3 m at 1 m spans 3 px either
+        // side of the centre: x in [6.5, 12.5] -> 7..=12, y in [1.5, 7.5] -> 2..=7.
+        let s = rasterize(
+            &square(0.3, 0.0),
+            &Pose { translation: [0.0, 0.0, 1.0], rotation: [0.0, 0.0, 0.0, 1.0] },
+            &k(20, 10, 10.0),
+        );
+        for y in 0..10 {
+            for x in 0..20 {
+                assert_eq!(
+                    s.get(x, y),
+                    (7..=12).contains(&x) && (2..=7).contains(&y),
+                    "({x}, {y})"
+                );
+            }
+        }
+        assert_eq!(s.area(), 36);
+        // Its outline is the ring of 6x6: 20 pixels.
+        let o = s.outline();
+        assert_eq!(o.area(), 20);
+        assert!(o.get(7, 2) && o.get(12, 7) && !o.get(9, 4));
+    }
+
+    #[test]
+    fn behind_the_camera_draws_nothing() {
+        let p = Pose { translation: [0.0, 0.0, -1.0], rotation: [0.0, 0.0, 0.0, 1.0] };
+        assert_eq!(rasterize(&square(0.3, 0.0), &p, &k(20, 10, 10.0)).area(), 0);
+    }
+
+    #[test]
+    fn rasterising_at_the_shrunk_size_matches_shrinking_the_full_raster() {
+        // 1280x800 -> 480x300; a tilted square off centre.
+        let (w, h) = (1280, 800);
+        let full_k = Intrinsics { width: w, height: h, fx: 900.0, fy: 900.0, cx: 650.3, cy: 390.8 };
+        let (ow, oh) = sheet_size(w, h, 480);
+        assert_eq!((ow, oh), (480, 300));
+        let a = 0.4f64;
+        let pose = Pose {
+            translation: [0.12, -0.05, 1.5],
+            rotation: [(a / 2.0).sin(), 0.0, 0.0, (a / 2.0).cos()],
+        };
+        let mesh = square(0.25, 0.0);
+        let full = rasterize(&mesh, &pose, &full_k);
+        let shrunk = shrink_silhouette(&full, ow, oh);
+        let direct = rasterize(&mesh, &pose, &scaled_intrinsics(&full_k, ow, oh));
+        let iou = shrunk.iou(&direct).expect("same size");
+        assert!(iou > 0.97, "IoU {iou}");
+        assert!(direct.area() > 2000, "{}", direct.area());
+    }
+
+    #[test]
+    fn the_box_filter_averages_and_keeps_size_when_small() {
+        // 4x2 grey ramp -> 2x1: each output the mean of a 2x2 block.
+        let src: Vec<u8> =
+            [0u8, 10, 20, 30, 40, 50, 60, 70].iter().flat_map(|&v| [v, v, v]).collect();
+        let out = shrink_u8(&src, 3, (4, 2), (2, 1));
+        assert_eq!(out, vec![25, 25, 25, 45, 45, 45]);
+        assert_eq!(sheet_size(96, 64, 480), (96, 64));
+        assert_eq!(sheet_size(1280, 1024, 480), (480, 384));
+        assert_eq!(spread(41, 8), vec![0, 5, 11, 17, 22, 28, 34, 40]);
+        assert_eq!(spread(3, 8), vec![0, 1, 2]);
+    }
+}
