@@ -41,6 +41,9 @@ pub struct Point {
     pub baseline: Option<f64>,
 }
 
+/// Sums of mean, std and baseline mean, and the counts behind them (cases, cases with a baseline).
+type Sums = (f64, f64, f64, usize, usize);
+
 /// The series of one metric: target -> points sorted by x. `x_of` maps a row to its x (None:
 /// not plotted), `scale` converts the metric's unit.
 pub fn series(
@@ -50,7 +53,7 @@ pub fn series(
     std_key: &str,
 ) -> BTreeMap<String, Vec<Point>> {
     // (target, x bits) -> sums
-    let mut acc: BTreeMap<(String, u64), (f64, f64, f64, usize, usize)> = BTreeMap::new();
+    let mut acc: BTreeMap<(String, u64), Sums> = BTreeMap::new();
     for r in rows.iter().filter(|r| r.status == "ok") {
         let (Some(x), Some(m)) = (x_of(r), r.metric(mean_key)) else { continue };
         let s = r.metric(std_key).unwrap_or(0.0);
@@ -172,7 +175,7 @@ fn sweep(
             let base: Vec<(f64, f64)> =
                 pts.iter().filter_map(|p| p.baseline.map(|b| (tx(p.x), b))).collect();
             if !base.is_empty() {
-                c.draw_series(DashedLineSeries::new(base, 3, 4, color.stroke_width(1).into()))
+                c.draw_series(DashedLineSeries::new(base, 3, 4, color.stroke_width(1)))
                     .map_err(err)?
                     .label(format!("{target}, ground-truth mesh"))
                     .legend(move |(x, y)| {
