@@ -29,9 +29,8 @@ pub fn serve(shared: Arc<Shared>, listener: TcpListener) {
             Ok((stream, _)) => {
                 shared.counters.connections.fetch_add(1, Ordering::Relaxed);
                 let s = shared.clone();
-                if let Ok(t) = std::thread::Builder::new()
-                    .name("hitl-stub-cmd-conn".into())
-                    .spawn(move || connection(s, stream))
+                if let Ok(t) =
+                    shared.thread_start.spawn("hitl-stub-cmd-conn", move || connection(s, stream))
                 {
                     workers.push(t);
                 }

@@ -67,6 +67,43 @@ pub struct StubConfig {
     pub max_command_rate_hz: Option<f64>,
     /// Physics step, seconds.
     pub physics_dt: f64,
+    /// Runs first on every thread the stub starts (physics, accept loops, connections).
+    pub thread_start: ThreadStart,
+}
+
+/// What every thread of the stub runs first. A control box has CPUs of its own; a stub embedded
+/// in the controller's process shares them with rendering, perception and recording, so the host
+/// gives the box's threads their priority here (`hitl run` puts them on SCHED_FIFO just below its
+/// loop and report reader). None by default: the stub's threads stay on the normal scheduler.
+#[derive(Clone, Default)]
+pub struct ThreadStart(Option<Arc<dyn Fn() + Send + Sync>>);
+
+impl ThreadStart {
+    /// Run `f` at the start of every stub thread.
+    pub fn new(f: impl Fn() + Send + Sync + 'static) -> Self {
+        Self(Some(Arc::new(f)))
+    }
+
+    /// Start a named thread that runs the hook, then `f`.
+    pub(crate) fn spawn(
+        &self,
+        name: &str,
+        f: impl FnOnce() + Send + 'static,
+    ) -> std::io::Result<JoinHandle<()>> {
+        let hook = self.0.clone();
+        std::thread::Builder::new().name(name.into()).spawn(move || {
+            if let Some(hook) = hook {
+                hook();
+            }
+            f()
+        })
+    }
+}
+
+impl std::fmt::Debug for ThreadStart {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str(if self.0.is_some() { "ThreadStart(hook)" } else { "ThreadStart(none)" })
+    }
 }
 
 /// The rate a control box receives commands at, at most (UFACTORY: 250 Hz).
@@ -85,6 +122,7 @@ impl Default for StubConfig {
             joint_limits: None,
             max_command_rate_hz: Some(BOX_COMMAND_RATE_HZ),
             physics_dt: 0.002,
+            thread_start: ThreadStart::default(),
         }
     }
 }
@@ -179,6 +217,7 @@ pub struct Shared {
     pub counters: Counters,
     pub physics_dt: f64,
     pub pacer: CommandPacer,
+    pub thread_start: ThreadStart,
 }
 
 impl Shared {
@@ -311,26 +350,24 @@ impl Stub {
             counters: Counters::default(),
             physics_dt: config.physics_dt,
             pacer: CommandPacer::new(config.max_command_rate_hz),
+            thread_start: config.thread_start.clone(),
         });
         let cmd_addr = cmd.local_addr()?;
         let mut report_addrs = Vec::new();
         let mut threads = Vec::new();
         let s = shared.clone();
         let faults = config.faults.clone();
-        threads.push(spawn("hitl-stub-physics", move || stepper::run(s, faults))?);
+        let start = &config.thread_start;
+        threads.push(start.spawn("hitl-stub-physics", move || stepper::run(s, faults))?);
         let s = shared.clone();
-        threads.push(spawn("hitl-stub-cmd", move || command::serve(s, cmd))?);
+        threads.push(start.spawn("hitl-stub-cmd", move || command::serve(s, cmd))?);
         for (kind, l) in report_listeners {
             report_addrs.push((kind, l.local_addr()?));
             let s = shared.clone();
-            threads.push(spawn("hitl-stub-report", move || reports::serve(s, l, kind))?);
+            threads.push(start.spawn("hitl-stub-report", move || reports::serve(s, l, kind))?);
         }
         Ok(StubHandle { shared, cmd_addr, report_addrs, threads })
     }
-}
-
-fn spawn(name: &str, f: impl FnOnce() + Send + 'static) -> Result<JoinHandle<()>, StubError> {
-    Ok(std::thread::Builder::new().name(name.into()).spawn(f)?)
 }
 
 /// Figures about the physics thread.

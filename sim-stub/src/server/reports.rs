@@ -18,9 +18,9 @@ pub fn serve(shared: Arc<Shared>, listener: TcpListener, kind: ReportKind) {
             Ok((stream, _)) => {
                 shared.counters.connections.fetch_add(1, Ordering::Relaxed);
                 let s = shared.clone();
-                if let Ok(t) = std::thread::Builder::new()
-                    .name("hitl-stub-report-conn".into())
-                    .spawn(move || connection(s, stream, kind))
+                if let Ok(t) = shared
+                    .thread_start
+                    .spawn("hitl-stub-report-conn", move || connection(s, stream, kind))
                 {
                     workers.push(t);
                 }
