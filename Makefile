@@ -4,7 +4,7 @@
 SHELL := /bin/bash
 CARGO ?= cargo
 
-.PHONY: all setup build demo test test-rust lint bench clean-deps test-slurm
+.PHONY: all setup build demo test test-rust lint bench clean-deps test-lerobot test-slurm
 
 all: build
 
@@ -27,6 +27,21 @@ test-rust:
 lint:
 	$(CARGO) fmt --all -- --check
 	$(CARGO) clippy --workspace --all-targets -- -D warnings
+
+# Opt-in: a full LeRobotDataset round trip of `hitl export lerobot` (docs/lerobot-export.md).
+# LeRobot >= 0.6 (depth maps) needs Python >= 3.12: PYTHON312 names one. A run an interlock
+# stops (exit 4) still leaves a recording of the captures made so far, which is exported.
+PYTHON312 ?= python3.12
+test-lerobot: setup
+	$(CARGO) build
+	@command -v $(PYTHON312) >/dev/null || { echo "test-lerobot: no $(PYTHON312) (set PYTHON312=...)"; exit 1; }
+	@[ -x .venv-lerobot/bin/python ] || $(PYTHON312) -m venv .venv-lerobot
+	.venv-lerobot/bin/pip install --quiet 'lerobot[dataset]>=0.6' pyarrow av
+	rm -rf runs/test-lerobot && mkdir -p runs/test-lerobot
+	target/debug/hitl plan --preset flyaround --range-m 10 --duration-s 20 --capture-every 20 --out runs/test-lerobot/fly.npz
+	target/debug/hitl run runs/test-lerobot/fly.npz --record runs/test-lerobot/run.mcap --camera sim --camera-preset wfov --camera-size 320x256 --light sim --plain --config tests/data/shared-vm-lab.toml || [ $$? -eq 4 ]
+	target/debug/hitl export lerobot runs/test-lerobot/run.mcap --out runs/test-lerobot/dataset
+	.venv-lerobot/bin/python scripts/validate_lerobot.py runs/test-lerobot/dataset --lerobot
 
 # Opt-in: a real single-node Slurm on this machine (munge, slurmctld, slurmd; loopback only; needs
 # root) plays a 4-case campaign as a job array (docs/campaigns.md).

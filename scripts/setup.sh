@@ -10,7 +10,8 @@
 #                the machine's own wake-up floor that `hitl bench loop` compares with), and
 #                libegl1, libegl-mesa0, libgl1-mesa-dri (the simulated camera renders with
 #                MuJoCo's OpenGL renderer on an offscreen EGL device: a GPU's, or Mesa's software
-#                one on a machine without), when missing and we are root
+#                one on a machine without), and ffmpeg (`hitl export lerobot` encodes the
+#                dataset's videos with its libx264 and libx265), when missing and we are root
 set -euo pipefail
 cd "$(dirname "$0")/.."
 ROOT=$(pwd)
@@ -26,7 +27,7 @@ say() { printf 'setup: %s\n' "$*"; }
 
 # --- Debian packages the build needs -------------------------------------------------------
 need_pkgs=()
-for p in pkg-config libudev-dev rt-tests libegl1 libegl-mesa0 libgl1-mesa-dri; do
+for p in pkg-config libudev-dev rt-tests libegl1 libegl-mesa0 libgl1-mesa-dri ffmpeg; do
   dpkg-query -W -f='${Status}' "$p" 2>/dev/null | grep -q 'install ok installed' || need_pkgs+=("$p")
 done
 if [ ${#need_pkgs[@]} -gt 0 ]; then

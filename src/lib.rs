@@ -14,4 +14,5 @@ pub mod console;
 pub mod control;
 pub mod devices;
 pub mod exit;
+pub mod export;
 pub mod rt;

@@ -43,6 +43,8 @@ enum Command {
     Probe(cli::probe::ProbeArgs),
     /// SITL campaigns from a manifest: run (resumable, N at a time), collect, slurm, list.
     Campaign(cli::campaign::CampaignArgs),
+    /// Export recordings: `hitl export lerobot RUN.mcap... --out DIR` (a LeRobot v3.0 dataset).
+    Export(cli::export::ExportArgs),
 }
 
 fn main() -> ExitCode {
@@ -67,6 +69,7 @@ fn main() -> ExitCode {
         #[cfg(feature = "stub")]
         Command::Calibrate(args) => cli::calibrate::run(args),
         Command::Campaign(args) => cli::campaign::run(args),
+        Command::Export(args) => cli::export::run(args),
     };
     ExitCode::from(code)
 }

@@ -6,6 +6,7 @@ pub mod calibrate;
 pub mod campaign;
 pub mod check;
 pub mod eval;
+pub mod export;
 pub mod plan;
 pub mod probe;
 pub mod report;

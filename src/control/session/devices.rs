@@ -66,6 +66,8 @@ pub(super) fn start_recorder(
             "rate_hz": req.rate_hz,
             "speed_scale": req.speed_scale,
             "camera": req.camera.to_string(),
+            "camera_preset": req.camera_preset,
+            "camera_size": req.camera_size,
             "light": req.light.to_string(),
             "perception": perception_name(&req.perception),
             "record_compression": req.record_compression.to_string(),
