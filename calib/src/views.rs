@@ -51,7 +51,7 @@ impl Default for ViewPlan {
             count: 20,
             dwell_s: 0.6,
             waypoint_dt_s: 0.04,
-            limit_fraction: 0.5,
+            limit_fraction: 0.3,
             edge_margin_px: 8.0,
         }
     }
