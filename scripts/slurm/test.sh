@@ -94,17 +94,22 @@ range_m = [5, 7]
 target = ["asymmetric", "one-plane"]
 TOML
 OUT=$WORK/campaign/out
+# A case an interlock stopped (a loaded shared VM starves the stub's physics) is recorded as
+# failed; the array is submitted again once: done cases skip in a second, failed ones replay.
 t0=$(date +%s.%N)
-submit=$("$HITL" campaign slurm "$WORK/campaign/slurm-4.toml" --out "$OUT" --limit "${LIMIT:-2}" \
-  --cpus-per-task 1 --mem 2G --time-min 10 --submit)
-echo "$submit"
-job=$(echo "$submit" | awk '/Submitted batch job/ {print $4}')
-[ -n "$job" ] || { echo "test-slurm: sbatch gave no job id" >&2; exit 1; }
-while squeue -h -j "$job" 2>/dev/null | grep -q .; do sleep 1; done
-t1=$(date +%s.%N)
-echo "job $job: 4 array tasks done in $(echo "$t1 - $t0" | bc) s"
+for pass in 1 2; do
+  submit=$("$HITL" campaign slurm "$WORK/campaign/slurm-4.toml" --out "$OUT" --limit "${LIMIT:-2}" \
+    --cpus-per-task 1 --mem 2G --time-min 10 --submit)
+  echo "$submit"
+  job=$(echo "$submit" | awk '/Submitted batch job/ {print $4}')
+  [ -n "$job" ] || { echo "test-slurm: sbatch gave no job id" >&2; exit 1; }
+  while squeue -h -j "$job" 2>/dev/null | grep -q .; do sleep 1; done
+  t1=$(date +%s.%N)
+  ok=$(grep -l '"status": "ok"' "$OUT"/cases/*/result.json 2>/dev/null | wc -l)
+  echo "pass $pass: job $job done after $(echo "$t1 - $t0" | bc) s, $ok of 4 cases ok"
+  [ "$ok" = 4 ] && break
+done
 "$HITL" campaign collect "$OUT"
-ok=$(grep -l '"status": "ok"' "$OUT"/cases/*/result.json | wc -l)
 for f in "$OUT"/slurm/*.out; do echo "== $f"; tail -3 "$f"; done
 [ "$ok" = 4 ] || { echo "test-slurm: $ok of 4 cases ok" >&2; exit 1; }
 echo "test-slurm: passed (4 of 4 cases through Slurm)"

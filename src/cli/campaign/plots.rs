@@ -2,13 +2,15 @@
 //! and mean e_r against a swept parameter, one series per target, error bars of one temporal
 //! standard deviation, and the ground-truth-mesh baseline of the same recordings dotted.
 //!
-//! - `range.svg` when `range_m` varies (log range axis; the paper's RQ3 figure);
+//! - `range.svg` when `range_m` varies (the paper's RQ3 figure);
 //! - `sun-phase.svg` when `sun_phase_deg` varies (x: the window's middle phase; RQ4), or else
 //!   when `arc_deg` varies (x: the interval's middle argument of latitude; results.csv gives each
 //!   interval's planned Sun phase range);
-//! - `mesh-faces.svg` when `mesh_faces` varies (log face-count axis; RQ2).
+//! - `mesh-faces.svg` when `mesh_faces` varies (RQ2).
 //!
-//! Cases that share a target and an x value (other parameters varied too) are averaged.
+//! Cases that share a target and an x value (other parameters varied too) are averaged. The
+//! baseline is drawn where it differs from the estimator (a decimated mesh); range and face count
+//! axes place their values evenly, in order.
 
 use super::collect::Row;
 use super::manifest::parse_window;
@@ -97,16 +99,34 @@ fn span(values: impl Iterator<Item = f64>) -> Range<f64> {
     (lo - pad)..(hi + pad)
 }
 
-/// Two panels (e_t, e_r) of one sweep. `log_x`: the x values are plotted as log10 and labelled
-/// back in their own units.
+/// A number as a short axis label.
+fn label(x: f64) -> String {
+    if x.abs() >= 100.0 {
+        format!("{x:.0}")
+    } else {
+        format!("{x:.2}").trim_end_matches('0').trim_end_matches('.').to_string()
+    }
+}
+
+/// Two panels (e_t, e_r) of one sweep. `categorical`: the distinct x values are placed evenly, in
+/// order, and labelled with their values (ranges, face counts); otherwise x is a linear axis.
 fn sweep(
     rows: &[Row],
     x_of: &dyn Fn(&Row) -> Option<f64>,
     x_desc: &str,
-    log_x: bool,
+    categorical: bool,
     out: &Path,
 ) -> Res<bool> {
-    let tx = |x: f64| if log_x { x.log10() } else { x };
+    let mut values: Vec<f64> = rows.iter().filter(|r| r.status == "ok").filter_map(x_of).collect();
+    values.sort_by(f64::total_cmp);
+    values.dedup();
+    let tx = |x: f64| {
+        if categorical {
+            values.iter().position(|v| *v == x).map_or(x, |i| i as f64)
+        } else {
+            x
+        }
+    };
     let panels = [
         ("mean_et_m", "std_et_m", "translation error e_t", "m"),
         ("mean_er_deg", "std_er_deg", "rotation error e_r", "deg"),
@@ -121,7 +141,11 @@ fn sweep(
     let parts = root.split_evenly((1, 2));
     for (k, (_, _, title, unit)) in panels.iter().enumerate() {
         let data = &all[k];
-        let xs = span(data.values().flatten().map(|p| tx(p.x)));
+        let xs = if categorical {
+            -0.5..(values.len() as f64 - 0.5)
+        } else {
+            span(data.values().flatten().map(|p| tx(p.x)))
+        };
         let ys = span(
             data.values()
                 .flatten()
@@ -138,14 +162,19 @@ fn sweep(
             .build_cartesian_2d(xs, ys)
             .map_err(err)?;
         let fmt_x = |v: &f64| {
-            let x = if log_x { 10f64.powf(*v) } else { *v };
-            if x >= 100.0 {
-                format!("{x:.0}")
-            } else {
-                format!("{x:.3}").trim_end_matches('0').trim_end_matches('.').to_string()
+            if !categorical {
+                return label(*v);
+            }
+            let i = v.round();
+            match values.get(i as usize) {
+                Some(x) if (v - i).abs() < 1e-6 && i >= 0.0 => label(*x),
+                _ => String::new(),
             }
         };
+        let ticks = if categorical { values.len() } else { 10 };
         c.configure_mesh()
+            .x_labels(ticks)
+            .disable_x_mesh()
             .x_desc(x_desc)
             .y_desc(*unit)
             .x_label_formatter(&fmt_x)
@@ -174,7 +203,10 @@ fn sweep(
             c.draw_series(line.iter().map(|p| Circle::new(*p, 3, color.filled()))).map_err(err)?;
             let base: Vec<(f64, f64)> =
                 pts.iter().filter_map(|p| p.baseline.map(|b| (tx(p.x), b))).collect();
-            if !base.is_empty() {
+            // Drawn where it differs from the estimator (a decimated mesh); else it is the line.
+            let differs =
+                pts.iter().any(|p| p.baseline.is_some_and(|b| (b - p.mean).abs() > 1e-12));
+            if differs {
                 c.draw_series(DashedLineSeries::new(base, 3, 4, color.stroke_width(1)))
                     .map_err(err)?
                     .label(format!("{target}, ground-truth mesh"))
@@ -187,6 +219,7 @@ fn sweep(
             }
         }
         c.configure_series_labels()
+            .position(SeriesLabelPosition::UpperLeft)
             .background_style(WHITE.mix(0.8))
             .border_style(BLACK.mix(0.3))
             .draw()
