@@ -66,7 +66,11 @@ pub fn format_of(stream: Stream, width: u32, height: u32) -> VideoFormat {
     match stream {
         Stream::Color => VideoFormat {
             codec: "h264",
-            pix_fmt: if width % 2 == 0 && height % 2 == 0 { "yuv420p" } else { "yuv444p" },
+            pix_fmt: if width.is_multiple_of(2) && height.is_multiple_of(2) {
+                "yuv420p"
+            } else {
+                "yuv444p"
+            },
             channels: 3,
         },
         Stream::Depth => VideoFormat { codec: "hevc", pix_fmt: "gray12le", channels: 1 },
