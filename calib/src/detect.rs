@@ -71,7 +71,7 @@ pub fn detect(
     // more comes back with its corners shifted by one or more places. The tags' centres do not
     // depend on that: a homography fitted to them says which image corner is which board corner.
     let h = if raw.len() >= 4 {
-        let pairs: Vec<((f64, f64), (f64, f64))> = raw
+        let pairs: Vec<PointPair> = raw
             .iter()
             .map(|(k, c)| {
                 let b = board.corners(*k);
@@ -125,7 +125,10 @@ pub fn rgb_to_grey(rgb: &[u8]) -> Vec<u8> {
 
 /// Homography (board x, y) -> image (u, v) from point pairs by the normalised direct linear
 /// transform; `None` when degenerate.
-fn homography(pairs: &[((f64, f64), (f64, f64))]) -> Option<nalgebra::Matrix3<f64>> {
+/// A board point (x, y) and the pixel it was seen at.
+type PointPair = ((f64, f64), (f64, f64));
+
+fn homography(pairs: &[PointPair]) -> Option<nalgebra::Matrix3<f64>> {
     use nalgebra::{DMatrix, Matrix3};
     let n = pairs.len() as f64;
     let norm = |pts: Vec<(f64, f64)>| {

@@ -98,6 +98,7 @@ pub struct CalibrateArgs {
 }
 
 /// A refusal: exit code and message.
+#[derive(Debug)]
 struct Refusal(u8, String);
 
 fn refuse<T>(code: u8, m: impl Into<String>) -> Result<T, Refusal> {
@@ -330,37 +331,7 @@ fn calibrate(args: CalibrateArgs) -> Result<(), Refusal> {
     let (views_seen, k_rec) = read_views(&record, &board)?;
     let k = k_rec.unwrap_or(k);
     let acc = Acceptance { max_rms_px: args.max_rms_px, ..Acceptance::default() };
-    let tags_seen: usize = views_seen.iter().map(|v| v.corners.len()).sum();
-    let whole = views_seen.iter().filter(|v| v.corners.len() >= acc.min_corners_per_view).count();
-    crate::outln!(
-        "captures: {}, board seen in {whole} (corners per view: {:?})",
-        views_seen.len(),
-        views_seen.iter().map(|v| v.corners.len()).collect::<Vec<_>>()
-    );
-    if tags_seen == 0 {
-        return refuse(
-            NEVER_DETECTED,
-            format!(
-                "no tag of the board ({}) was detected in any of the {} captures: check that the \
-                 board is mounted and lit, that it is the board named in [board] (family, first \
-                 id), and that the camera is focused",
-                board.describe(),
-                views_seen.len()
-            ),
-        );
-    }
-    if whole < acc.min_views {
-        return refuse(
-            BOARD_OUT_OF_VIEW,
-            format!(
-                "the board was seen whole (at least {} corners) in only {whole} of {} captures: \
-                 it is not where [board] and the target pose put it (off by more than the views' \
-                 margin); measure its placement again and rerun",
-                acc.min_corners_per_view,
-                views_seen.len()
-            ),
-        );
-    }
+    judge_detections(&views_seen, &board, &acc)?;
 
     // 4. Solve and judge.
     let sol = solve::solve(&views_seen, &k, &acc).map_err(|e| match e {
@@ -435,6 +406,44 @@ fn calibrate(args: CalibrateArgs) -> Result<(), Refusal> {
     );
     write_atomic(&out, text.as_bytes())?;
     crate::outln!("calibrated lab configuration: {}", out.display());
+    Ok(())
+}
+
+/// Refuse captures that cannot be solved: no tag of the board anywhere ([`NEVER_DETECTED`]), or
+/// the board whole in too few of them ([`BOARD_OUT_OF_VIEW`]).
+fn judge_detections(views_seen: &[View], board: &Board, acc: &Acceptance) -> Result<(), Refusal> {
+    let tags_seen: usize = views_seen.iter().map(|v| v.corners.len()).sum();
+    let whole = views_seen.iter().filter(|v| v.corners.len() >= acc.min_corners_per_view).count();
+    crate::outln!(
+        "captures: {}, board seen in {whole} (corners per view: {:?})",
+        views_seen.len(),
+        views_seen.iter().map(|v| v.corners.len()).collect::<Vec<_>>()
+    );
+    if tags_seen == 0 {
+        return refuse(
+            NEVER_DETECTED,
+            format!(
+                "no tag of the board ({}) was detected in any of the {} captures: check that the \
+                 board is mounted and lit, that it is the board named in [board] (family, first \
+                 id), and that the camera is focused",
+                board.describe(),
+                views_seen.len()
+            ),
+        );
+    }
+    if whole < acc.min_views {
+        return refuse(
+            BOARD_OUT_OF_VIEW,
+            format!(
+                "the board was seen whole (at least {} corners) in only {whole} of {} captures: \
+                 it is not where [board] and the target pose put it (off by more than the views' \
+                 margin); measure its placement again and rerun",
+                acc.min_corners_per_view,
+                views_seen.len()
+            ),
+        );
+    }
+
     Ok(())
 }
 
@@ -568,4 +577,50 @@ fn read_views(path: &Path, board: &Board) -> Result<(Vec<View>, Option<Intrinsic
         out.push(View { base_flange, corners: det.corners });
     }
     Ok((out, k))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use hitl_calib::Corner;
+    use nalgebra::Point3;
+
+    fn view(corners: usize) -> View {
+        let c = Corner { board: Point3::origin(), pixel: (0.0, 0.0) };
+        View { base_flange: Isometry3::identity(), corners: vec![c; corners] }
+    }
+
+    #[test]
+    fn captures_without_the_board_are_refused_by_kind() {
+        let board = Board::new(&BoardPlacement::default()).expect("board");
+        let acc = Acceptance::default();
+        let none: Vec<View> = (0..20).map(|_| view(0)).collect();
+        let Err(Refusal(code, m)) = judge_detections(&none, &board, &acc) else {
+            panic!("accepted")
+        };
+        assert_eq!(code, NEVER_DETECTED, "{m}");
+        assert!(m.contains("no tag"), "{m}");
+        // Seen, but whole in only 5 of 20 captures (the rest at the image's edge).
+        let partial: Vec<View> = (0..20).map(|i| view(if i < 5 { 144 } else { 8 })).collect();
+        let Err(Refusal(code, m)) = judge_detections(&partial, &board, &acc) else {
+            panic!("accepted")
+        };
+        assert_eq!(code, BOARD_OUT_OF_VIEW, "{m}");
+        assert!(m.contains("only 5 of 20"), "{m}");
+        let whole: Vec<View> = (0..20).map(|_| view(144)).collect();
+        assert!(judge_detections(&whole, &board, &acc).is_ok());
+    }
+
+    #[test]
+    fn the_output_is_written_whole_or_not_at_all() {
+        let dir = tempfile::tempdir().expect("tempdir");
+        let out = dir.path().join("lab.toml");
+        write_atomic(&out, b"[camera]\n").expect("written");
+        assert_eq!(std::fs::read(&out).expect("read"), b"[camera]\n");
+        assert_eq!(std::fs::read_dir(dir.path()).expect("dir").count(), 1, "no temporary left");
+        let Err(Refusal(code, _)) = write_atomic(&dir.path().join("missing/lab.toml"), b"x") else {
+            panic!("wrote into a missing folder")
+        };
+        assert_eq!(code, exit::BAD_INPUT);
+    }
 }
