@@ -49,3 +49,26 @@ fn refusals_before_motion_leave_no_output() {
     assert_eq!(out.status.code(), Some(2));
     assert!(!out_toml.exists(), "a refusal wrote {}", out_toml.display());
 }
+
+#[test]
+fn recordings_name_their_calibration() {
+    use hitl_record::RunMetadata;
+    use hitl_trajectories::lab::{CalibrationProvenance, LabConfig};
+    let m = RunMetadata::default().to_map();
+    assert_eq!(m.get("calibration").map(String::as_str), Some("nominal"));
+    let mut lab = LabConfig::default();
+    assert_eq!(lab.calibration_name(), "nominal");
+    lab.calibration = Some(CalibrationProvenance {
+        date: "2026-11-23T16:00:00Z".into(),
+        views: 20,
+        rms_px: 0.218,
+        ..Default::default()
+    });
+    let name = lab.calibration_name();
+    assert_eq!(name, "calibrated 2026-11-23T16:00:00Z (20 views, 0.218 px RMS)");
+    let m = RunMetadata { calibration: name.clone(), ..Default::default() }.to_map();
+    assert_eq!(m.get("calibration"), Some(&name));
+    // The provenance block survives the lab TOML round trip.
+    let back = LabConfig::from_toml(&lab.to_toml()).expect("round trip");
+    assert_eq!(back.calibration, lab.calibration);
+}
