@@ -6,6 +6,9 @@
 //!
 //! Needs ffmpeg (libx264, libx265) and the test venv's pyarrow and av (`make setup`).
 
+use hitl::export::episode::Stream;
+use hitl::export::tables::{Column, Table};
+use hitl::export::video::{format_of, DepthQuant};
 use hitl_hal::Intrinsics;
 use hitl_record::reader::read_recording;
 use hitl_record::{
@@ -252,4 +255,41 @@ fn bad_input_gets_exit_2_a_clear_error_and_leaves_nothing() {
     let (code, text) = export(&[s(&missing), "--out", s(&out)]);
     assert_eq!(code, Some(2), "{text}");
     only(d, &["notes.mcap", "empty.mcap", "a.mcap", "b.mcap"]);
+}
+
+#[test]
+fn depth_codes_follow_lerobots_log_scale_and_read_back_within_half_a_quantum() {
+    let q = DepthQuant::LEROBOT_DEFAULT;
+    assert_eq!(q.code(0.0), 0, "no return");
+    assert_eq!(q.code(f32::NAN), 0);
+    assert_eq!(q.code(0.01), 0, "min is code 0");
+    assert_eq!(q.code(10.0), DepthQuant::QMAX, "max is the top code");
+    assert_eq!(q.code(50.0), DepthQuant::QMAX, "clipped");
+    // 1 m: (ln 4.5 - ln 3.51) / (ln 13.5 - ln 3.51) * 4095 = 755.3 -> 755.
+    assert_eq!(q.code(1.0), 755);
+    for d in [0.3f32, 0.8, 1.0, 1.7, 2.5, 4.0] {
+        let back = q.depth_m(q.code(d));
+        // One quantum at d is (d + shift) * ln(13.5 / 3.51) / 4095 (under 2.5 mm at 4 m).
+        let quantum = (f64::from(d) + 3.5) * ((13.5f64 / 3.51).ln() / 4095.0);
+        assert!((back - f64::from(d)).abs() <= 0.5 * quantum + 1e-9, "{d} -> {back}");
+    }
+}
+
+#[test]
+fn colour_of_an_odd_size_keeps_full_chroma() {
+    assert_eq!(format_of(Stream::Color, 320, 256).pix_fmt, "yuv420p");
+    assert_eq!(format_of(Stream::Color, 321, 256).pix_fmt, "yuv444p");
+    assert_eq!(format_of(Stream::Depth, 321, 256).pix_fmt, "gray12le");
+}
+
+#[test]
+fn a_table_refuses_columns_of_different_lengths() {
+    let dir = tempfile::tempdir().expect("tempdir");
+    let mut t = Table::default();
+    t.push("a", Column::I64(vec![1, 2]));
+    t.push("b", Column::F32s(7, vec![0.0; 7]));
+    let e = t.write(&dir.path().join("x.parquet"), &[]).expect_err("lengths differ");
+    assert!(e.to_string().contains("column b"), "{e}");
+    t.columns[1].1 = Column::F32s(7, vec![0.0; 14]);
+    t.write(&dir.path().join("x.parquet"), &[(0, 1), (1, 2)]).expect("writes");
 }

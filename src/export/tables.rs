@@ -198,20 +198,3 @@ pub fn tasks_table(tasks: &[String]) -> Table {
     t.metadata.push(("pandas".into(), pandas.to_string()));
     t
 }
-
-#[cfg(test)]
-mod tests {
-    use super::*;
-
-    #[test]
-    fn a_table_refuses_columns_of_different_lengths() {
-        let dir = tempfile::tempdir().expect("tempdir");
-        let mut t = Table::default();
-        t.push("a", Column::I64(vec![1, 2]));
-        t.push("b", Column::F32s(7, vec![0.0; 7]));
-        let e = t.write(&dir.path().join("x.parquet"), &[]).expect_err("lengths differ");
-        assert!(e.to_string().contains("column b"), "{e}");
-        t.columns[1].1 = Column::F32s(7, vec![0.0; 14]);
-        t.write(&dir.path().join("x.parquet"), &[(0, 1), (1, 2)]).expect("writes");
-    }
-}

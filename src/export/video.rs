@@ -356,32 +356,3 @@ fn encode_episode(
     }
     Ok(())
 }
-
-#[cfg(test)]
-mod tests {
-    use super::*;
-
-    #[test]
-    fn depth_codes_follow_lerobots_log_scale_and_read_back_within_a_quantum() {
-        let q = DepthQuant::LEROBOT_DEFAULT;
-        assert_eq!(q.code(0.0), 0, "no return");
-        assert_eq!(q.code(f32::NAN), 0);
-        assert_eq!(q.code(0.01), 0, "min is code 0");
-        assert_eq!(q.code(10.0), DepthQuant::QMAX, "max is the top code");
-        assert_eq!(q.code(50.0), DepthQuant::QMAX, "clipped");
-        // 1 m: (ln 4.5 - ln 3.51) / (ln 13.5 - ln 3.51) * 4095 = 755.2 -> 755.
-        assert_eq!(q.code(1.0), 755);
-        for d in [0.3f32, 0.8, 1.0, 1.7, 2.5, 4.0] {
-            let back = q.depth_m(q.code(d));
-            // One quantum at d is (d + shift) * (ln(13.5 / 3.51) / 4095) (under 2.5 mm at 4 m).
-            let quantum = (f64::from(d) + 3.5) * ((13.5f64 / 3.51).ln() / 4095.0);
-            assert!((back - f64::from(d)).abs() <= 0.5 * quantum + 1e-9, "{d} -> {back}");
-        }
-    }
-
-    #[test]
-    fn odd_sizes_keep_full_chroma() {
-        assert_eq!(format_of(Stream::Color, 320, 256).pix_fmt, "yuv420p");
-        assert_eq!(format_of(Stream::Color, 321, 256).pix_fmt, "yuv444p");
-    }
-}
