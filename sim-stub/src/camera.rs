@@ -435,8 +435,11 @@ impl Worker {
         let intr = self.stream.load();
         let (image, truth) = match &mut self.renderer {
             Backend::RayCast(r) => render_capture(r, &sample.q, &intr, level, &mut noise),
-            Backend::Mujoco(r) => capture_with(&mut **r, &sample.q, &intr, level, &mut noise)
-                .map_err(|e| e.to_string())?,
+            Backend::Mujoco(r) => {
+                r.set_capture_tick(request.tick); // the `orbit` Sun at this capture
+                capture_with(&mut **r, &sample.q, &intr, level, &mut noise)
+                    .map_err(|e| e.to_string())?
+            }
         };
         let frame = RgbdFrame {
             request,

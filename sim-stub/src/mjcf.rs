@@ -14,6 +14,14 @@
 //! includes the joint's armature), so the arm tracks a 250 Hz servo stream with about
 //! `2 / SERVO_OMEGA` seconds of lag. Gravity is on and compensated by the drives (`gravcomp="1"`
 //! on every arm body), as the box's own gravity compensation does.
+//!
+//! Looks (docs/stub-scene.md): two scene kinds ([`SceneKind`]) share every collision geom, so the
+//! stub's physics and the preflight agree whichever is drawn. Geom group
+//! [`COLLISION_ONLY_GROUP`] is never drawn (keep-out volumes; in `orbit` also the enclosure, the
+//! tripod and the arm); visual-only geoms (lamp housing, Earth) collide with nothing. `lab` is
+//! the enclosure's twin lit by the studio light as a spot light; `orbit` is a black sky with the
+//! Earth along the Hill frame's nadir and a directional Sun whose direction the camera sets at
+//! each capture. Both cast shadows.
 
 use crate::mujoco_plant::StubSceneError;
 use crate::target_look::{write_assets, write_target};
@@ -21,8 +29,9 @@ pub use crate::target_look::{
     TargetMaterial, TargetModel, TargetPart, TargetTexture, TriangleMesh,
 };
 use hitl_trajectories::kinematics::{self, CHAIN, DOF, LINK_RADII};
-use hitl_trajectories::lab::LabConfig;
-use nalgebra::{Isometry3, Point3, UnitQuaternion, Vector3};
+use hitl_trajectories::lab::{LabConfig, SceneKind};
+use hitl_trajectories::planner::mapping;
+use nalgebra::{Isometry3, Matrix3, Point3, UnitQuaternion, Vector3};
 use std::fmt::Write as _;
 
 /// Joint names, joint 1 first. A user scene must use these names.
@@ -41,8 +50,36 @@ pub const TARGET_BODY: &str = "target";
 pub const CAMERA_NAME: &str = "flange_camera";
 /// A site at the camera's optical centre with OpenCV axes (x right, y down, z forward).
 pub const CAMERA_SITE: &str = "camera_cv";
-/// The directional light that plays the Sun.
+/// The light that plays the Sun: the studio light (a spot) in `lab`, a directional light in
+/// `orbit`.
 pub const SUN_LIGHT: &str = "sun";
+/// The geom group that collides but is never drawn.
+pub const COLLISION_ONLY_GROUP: i32 = 3;
+/// The Earth's geom in `orbit` (visual only).
+pub const EARTH_GEOM: &str = "earth";
+/// The studio lamp's housing in `lab` (visual only, behind the light, out of its beam).
+pub const LAMP_GEOM: &str = "lamp-housing";
+/// Angular radius of the Earth seen from the chief, degrees: the planner's default 12-hour orbit
+/// (a = 26 560 km, Earth radius 6 378 km gives asin(6378 / 26560) = 13.9 deg).
+pub const EARTH_ANGULAR_RADIUS_DEG: f64 = 13.9;
+/// Distance from the target to the Earth's centre in the scene, metres: beyond the camera's
+/// depth range (the depth image never sees it), inside the drawing range.
+pub const EARTH_DISTANCE_M: f64 = 60.0;
+/// Farthest distance drawn in `orbit`, metres (the Earth's far side fits).
+pub const ORBIT_DRAW_RANGE_M: f64 = 100.0;
+/// Half the side of the directional Sun's shadow map square, at least, metres (around the
+/// target; [`shadow_half_size_m`]).
+pub const SUN_SHADOW_HALF_M: f64 = 0.05;
+/// The studio light's beam: cutoff (half angle, degrees) and exponent (falloff inside it).
+pub const SPOT_CUTOFF_DEG: f64 = 25.0;
+pub const SPOT_EXPONENT: f64 = 8.0;
+/// Shadow map side, texels. MuJoCo's default is 4096; a software renderer fills the map at every
+/// frame, and 1024 costs a quarter of 2048 (docs/stub-scene.md has the figures) while still giving
+/// about 0.5 mm texels at the target in `lab` and 0.2 mm on the default target in `orbit`.
+pub const SHADOW_MAP_SIZE: u32 = 1024;
+/// The part of the studio light's beam its shadow map covers (MuJoCo's `shadowscale`): half the
+/// cutoff each side of the axis, 12.5 deg, about 0.24 m around the target.
+pub const SPOT_SHADOW_SCALE: f64 = 0.5;
 
 /// Simulation timestep, seconds.
 pub const TIMESTEP_S: f64 = 0.002;
@@ -187,10 +224,66 @@ pub fn mujoco_camera_from_opencv(opencv: &UnitQuaternion<f64>) -> UnitQuaternion
     opencv * UnitQuaternion::from_axis_angle(&Vector3::x_axis(), std::f64::consts::PI)
 }
 
-/// The whole lab as an MJCF document.
+/// What the scene shows besides the lab's geometry: its kind, and where the Hill frame of the
+/// trajectory points (for the Earth in `orbit`).
+#[derive(Debug, Clone, PartialEq)]
+pub struct SceneOptions {
+    pub kind: SceneKind,
+    /// RTN-to-base rotation of the trajectory's plan (`v_base = M v_rtn`, the NPZ's
+    /// `meta.rtn_to_base`); the planner's default when the trajectory has none.
+    pub rtn_to_base: Matrix3<f64>,
+}
+
+impl SceneOptions {
+    /// `lab.scene.kind` with the planner's default Hill frame.
+    pub fn for_lab(lab: &LabConfig) -> Self {
+        Self { kind: lab.scene.kind, rtn_to_base: mapping::default_rtn_to_base() }
+    }
+}
+
+/// The nadir (towards the Earth's centre, -R of the Hill frame) in the lab frame.
+pub fn nadir_lab(lab: &LabConfig, rtn_to_base: &Matrix3<f64>) -> Vector3<f64> {
+    let radial_base = rtn_to_base.column(0).into_owned();
+    let n = -(lab.base_in_lab().rotation * radial_base);
+    n.try_normalize(1e-12).unwrap_or_else(|| -Vector3::z())
+}
+
+/// The target's centre in the lab frame.
+pub fn target_centre_lab(lab: &LabConfig) -> Point3<f64> {
+    lab.base_in_lab() * lab.target_position_base()
+}
+
+/// Half the side of the directional Sun's shadow square for a target of greatest dimension
+/// `size_m`, metres: the target's greatest dimension (a target centred on its frame reaches at
+/// most sqrt(3)/2 of it from its centre; in `orbit` nothing else casts a shadow), at least
+/// [`SUN_SHADOW_HALF_M`].
+pub fn shadow_half_size_m(size_m: f64) -> f64 {
+    SUN_SHADOW_HALF_M.max(size_m)
+}
+
+/// The scene's length scale (MuJoCo's `statistic/extent`), metres: half the enclosure's
+/// diagonal. Fixed here so that the Earth's size does not change clip planes and shadow maps.
+pub fn scene_extent_m(lab: &LabConfig) -> f64 {
+    Vector3::from(lab.enclosure.size_m).norm() / 2.0
+}
+
+/// The whole lab as an MJCF document, in the scene kind `lab.scene.kind` names.
 pub fn lab_mjcf(lab: &LabConfig, target: &TargetModel) -> Result<String, StubSceneError> {
+    lab_scene_mjcf(lab, target, &SceneOptions::for_lab(lab))
+}
+
+/// The whole lab as an MJCF document, drawn as `options` say.
+pub fn lab_scene_mjcf(
+    lab: &LabConfig,
+    target: &TargetModel,
+    options: &SceneOptions,
+) -> Result<String, StubSceneError> {
     lab.validate().map_err(|e| StubSceneError::Lab(e.to_string()))?;
     target.validate()?;
+    if options.rtn_to_base.iter().any(|x| !x.is_finite()) {
+        return Err(StubSceneError::Lab("the trajectory's rtn_to_base is not finite".into()));
+    }
+    let kind = options.kind;
     let mut x = String::with_capacity(16 * 1024);
     let _ = writeln!(x, "<mujoco model=\"hitl-lab\">");
     let _ = writeln!(x, "  <compiler angle=\"radian\" autolimits=\"true\"/>");
@@ -199,14 +292,17 @@ pub fn lab_mjcf(lab: &LabConfig, target: &TargetModel) -> Result<String, StubSce
         "  <option timestep=\"{}\" gravity=\"0 0 -9.81\" integrator=\"implicitfast\"/>",
         nums(&[TIMESTEP_S])
     );
-    x.push_str(
-        "  <default>\n    <default class=\"arm\">\n      <geom contype=\"1\" conaffinity=\"0\" group=\"1\" rgba=\"0.85 0.85 0.85 1\"/>\n    </default>\n    <default class=\"scene\">\n      <geom contype=\"0\" conaffinity=\"1\" group=\"0\" rgba=\"0.03 0.03 0.03 1\"/>\n    </default>\n    <default class=\"target\">\n      <geom contype=\"0\" conaffinity=\"1\" group=\"2\"/>\n    </default>\n  </default>\n",
-    );
+    write_visual(&mut x, lab, target);
+    write_defaults(&mut x, kind);
     write_assets(&mut x, target);
+    write_scene_assets(&mut x);
     let _ = writeln!(x, "  <worldbody>");
-    write_sun(&mut x, lab);
-    write_enclosure(&mut x, lab);
-    write_tripod_and_light(&mut x, lab);
+    write_sun(&mut x, lab, kind);
+    write_enclosure(&mut x, lab, kind);
+    write_tripod_and_light(&mut x, lab, kind);
+    if kind == SceneKind::Orbit {
+        write_earth(&mut x, lab, &options.rtn_to_base);
+    }
     write_target(&mut x, &(lab.base_in_lab() * lab.target_in_base()), target);
     crate::board::write_board(&mut x, lab).map_err(StubSceneError::Lab)?;
     write_arm(&mut x, lab);
@@ -229,17 +325,121 @@ pub fn lab_mjcf(lab: &LabConfig, target: &TargetModel) -> Result<String, StubSce
     Ok(x)
 }
 
-fn write_sun(x: &mut String, lab: &LabConfig) {
-    let d = sun_direction_lab(lab);
+/// Rendering quality, clip and shadow settings, and the scene's fixed length scale.
+fn write_visual(x: &mut String, lab: &LabConfig, target: &TargetModel) {
+    let extent = scene_extent_m(lab);
+    let (lo, hi) = lab.enclosure_box();
+    let centre = (lo.coords + hi.coords) / 2.0;
     let _ = writeln!(
         x,
-        "    <light name=\"{SUN_LIGHT}\" type=\"directional\" pos=\"{}\" dir=\"{}\" diffuse=\"1 1 1\" castshadow=\"true\"/>",
-        nums(&lab.light.position_lab_m),
-        pos_attr(&d)
+        "  <statistic extent=\"{}\" center=\"{}\"/>",
+        nums(&[extent]),
+        pos_attr(&centre)
+    );
+    // shadowclip: the directional Sun's shadow square, as a fraction of the extent;
+    // shadowscale: the part of a spot light's beam its shadow map covers.
+    let clip = shadow_half_size_m(target.greatest_dimension_m) / extent;
+    let _ = writeln!(
+        x,
+        "  <visual>\n    <quality shadowsize=\"{SHADOW_MAP_SIZE}\"/>\n    <map shadowclip=\"{}\" shadowscale=\"{}\"/>\n  </visual>",
+        nums(&[clip]),
+        nums(&[SPOT_SHADOW_SCALE])
     );
 }
 
-fn write_enclosure(x: &mut String, lab: &LabConfig) {
+/// Default classes: the arm, the enclosure's curtains, collision-only keep-outs, the target,
+/// visual-only decor. In `orbit` the arm and the enclosure are collision only.
+fn write_defaults(x: &mut String, kind: SceneKind) {
+    let hidden = COLLISION_ONLY_GROUP;
+    let (arm_group, curtain) = match kind {
+        SceneKind::Lab => (1, "group=\"0\" material=\"curtain\"".to_string()),
+        SceneKind::Orbit => (hidden, format!("group=\"{hidden}\"")),
+    };
+    let _ = write!(
+        x,
+        "  <default>\n\
+         \x20   <default class=\"arm\">\n      <geom contype=\"1\" conaffinity=\"0\" group=\"{arm_group}\" rgba=\"0.85 0.85 0.85 1\"/>\n    </default>\n\
+         \x20   <default class=\"curtain\">\n      <geom contype=\"0\" conaffinity=\"1\" {curtain}/>\n    </default>\n\
+         \x20   <default class=\"keepout\">\n      <geom contype=\"0\" conaffinity=\"1\" group=\"{hidden}\" rgba=\"0.5 0.5 0.5 1\"/>\n    </default>\n\
+         \x20   <default class=\"target\">\n      <geom contype=\"0\" conaffinity=\"1\" group=\"2\"/>\n    </default>\n\
+         \x20   <default class=\"decor\">\n      <geom contype=\"0\" conaffinity=\"0\" group=\"0\"/>\n    </default>\n\
+         \x20 </default>\n"
+    );
+}
+
+/// Materials of the lab's and the orbit's own things (the target's are its own). The curtains
+/// are black-out fabric: near black, faintly warm, matte (no specular, no reflectance). A fine
+/// weave texture was tried and dropped: texturing every curtain pixel twice (MuJoCo's shadow
+/// pass draws the scene again) cost a third of a 1280x800 frame in software.
+fn write_scene_assets(x: &mut String) {
+    x.push_str(
+        "  <asset>\n\
+         \x20   <material name=\"curtain\" rgba=\"0.065 0.062 0.06 1\" specular=\"0\" shininess=\"0\" reflectance=\"0\"/>\n\
+         \x20   <material name=\"tripod\" rgba=\"0.12 0.12 0.13 1\" specular=\"0.35\" shininess=\"0.4\"/>\n\
+         \x20   <material name=\"lamp\" rgba=\"0.08 0.08 0.08 1\" specular=\"0.5\" shininess=\"0.6\"/>\n\
+         \x20   <material name=\"lamp-lens\" rgba=\"1 0.97 0.9 1\" emission=\"1\"/>\n\
+         \x20   <texture name=\"earth-clouds\" type=\"cube\" builtin=\"gradient\" rgb1=\"0.35 0.55 0.95\" rgb2=\"0.04 0.12 0.4\" mark=\"random\" random=\"0.25\" markrgb=\"0.95 0.95 0.97\" width=\"256\" height=\"256\"/>\n\
+         \x20   <material name=\"earth\" texture=\"earth-clouds\" specular=\"0.15\" shininess=\"0.2\" rgba=\"1 1 1 1\"/>\n\
+         \x20 </asset>\n",
+    );
+}
+
+/// The Sun: in `lab` the studio light, a spot at its configured position aimed at the target,
+/// its beam falling off with distance (1 at the target); in `orbit` a directional light whose
+/// direction the camera sets per capture (the default: from the light's position towards the
+/// target). Both cast shadows.
+fn write_sun(x: &mut String, lab: &LabConfig, kind: SceneKind) {
+    let d = sun_direction_lab(lab);
+    let pos = Vector3::from(lab.light.position_lab_m);
+    match kind {
+        SceneKind::Lab => {
+            // attenuation 1 / (c0 + c2 d^2): the target, at distance r, gets 1; the beam's
+            // far end (curtains) gets about (r / d)^2 of it.
+            let r = (target_centre_lab(lab).coords - pos).norm().max(0.1);
+            let _ = writeln!(
+                x,
+                "    <light name=\"{SUN_LIGHT}\" type=\"spot\" pos=\"{}\" dir=\"{}\" cutoff=\"{}\" exponent=\"{}\" attenuation=\"{}\" diffuse=\"1 1 1\" specular=\"0.4 0.4 0.4\" castshadow=\"true\"/>",
+                pos_attr(&pos),
+                pos_attr(&d),
+                nums(&[SPOT_CUTOFF_DEG]),
+                nums(&[SPOT_EXPONENT]),
+                nums(&[0.2, 0.0, 0.8 / (r * r)])
+            );
+        }
+        SceneKind::Orbit => {
+            let _ = writeln!(
+                x,
+                "    <light name=\"{SUN_LIGHT}\" type=\"directional\" pos=\"{}\" dir=\"{}\" diffuse=\"1 1 1\" specular=\"0.5 0.5 0.5\" castshadow=\"true\"/>",
+                pos_attr(&sun_shadow_position(lab, &d).coords),
+                pos_attr(&d)
+            );
+        }
+    }
+}
+
+/// Where the directional Sun's shadow camera sits for light travelling along `dir`: on the
+/// target's Sun side at [`SUN_SHADOW_DISTANCE_M`], so its shadow map is centred on the target.
+pub fn sun_shadow_position(lab: &LabConfig, dir: &Vector3<f64>) -> Point3<f64> {
+    target_centre_lab(lab) - dir * SUN_SHADOW_DISTANCE_M
+}
+
+/// Distance from the target to the directional Sun's shadow camera, metres.
+pub const SUN_SHADOW_DISTANCE_M: f64 = 3.0;
+
+/// The Earth in `orbit`: a sphere along the nadir at [`EARTH_DISTANCE_M`], as large as the
+/// Earth looks from the planner's default orbit.
+fn write_earth(x: &mut String, lab: &LabConfig, rtn_to_base: &Matrix3<f64>) {
+    let centre = target_centre_lab(lab) + nadir_lab(lab, rtn_to_base) * EARTH_DISTANCE_M;
+    let radius = EARTH_DISTANCE_M * EARTH_ANGULAR_RADIUS_DEG.to_radians().sin();
+    let _ = writeln!(
+        x,
+        "    <geom name=\"{EARTH_GEOM}\" class=\"decor\" type=\"sphere\" size=\"{}\" pos=\"{}\" material=\"earth\"/>",
+        nums(&[radius]),
+        pos_attr(&centre.coords)
+    );
+}
+
+fn write_enclosure(x: &mut String, lab: &LabConfig, _kind: SceneKind) {
     let [sx, sy, sz] = lab.enclosure.size_m;
     let t = WALL_THICKNESS;
     let (hx, hy, hz) = (sx / 2.0 + t, sy / 2.0 + t, sz / 2.0 + t);
@@ -255,22 +455,29 @@ fn write_enclosure(x: &mut String, lab: &LabConfig) {
     for (name, c, h) in walls {
         let _ = writeln!(
             x,
-            "    <geom name=\"{name}\" class=\"scene\" type=\"box\" pos=\"{}\" size=\"{}\"/>",
+            "    <geom name=\"{name}\" class=\"curtain\" type=\"box\" pos=\"{}\" size=\"{}\"/>",
             nums(&c),
             nums(&h)
         );
     }
 }
 
-fn write_tripod_and_light(x: &mut String, lab: &LabConfig) {
+/// The tripod (drawn in `lab`, collision only in `orbit`), the light's keep-out sphere (collision
+/// only) and, in `lab`, the lamp's housing: a short dark cylinder behind the light's position,
+/// out of its own beam and shadow camera, with a glowing lens.
+fn write_tripod_and_light(x: &mut String, lab: &LabConfig, kind: SceneKind) {
     let base = lab.base_in_lab();
     for (name, c) in lab.keepouts_base() {
         let (a, b) = (base * c.a, base * c.b);
         match name {
             "tripod" if (b - a).norm() > 1e-9 && c.radius > 0.0 => {
+                let look = match kind {
+                    SceneKind::Lab => "class=\"curtain\" material=\"tripod\"",
+                    SceneKind::Orbit => "class=\"keepout\"",
+                };
                 let _ = writeln!(
                     x,
-                    "    <geom name=\"tripod\" class=\"scene\" type=\"capsule\" size=\"{}\" fromto=\"{}\" rgba=\"0.15 0.15 0.15 1\"/>",
+                    "    <geom name=\"tripod\" {look} type=\"capsule\" size=\"{}\" fromto=\"{}\"/>",
                     nums(&[c.radius]),
                     nums(&[a.x, a.y, a.z, b.x, b.y, b.z])
                 );
@@ -278,13 +485,32 @@ fn write_tripod_and_light(x: &mut String, lab: &LabConfig) {
             "light" if c.radius > 0.0 => {
                 let _ = writeln!(
                     x,
-                    "    <geom name=\"light\" class=\"scene\" type=\"sphere\" size=\"{}\" pos=\"{}\" rgba=\"0.2 0.2 0.2 1\"/>",
+                    "    <geom name=\"light\" class=\"keepout\" type=\"sphere\" size=\"{}\" pos=\"{}\"/>",
                     nums(&[c.radius]),
                     pos_attr(&a.coords)
                 );
             }
             _ => {}
         }
+    }
+    if kind == SceneKind::Lab {
+        let d = sun_direction_lab(lab);
+        let p = Vector3::from(lab.light.position_lab_m);
+        let (r, back, front) = (0.06, 0.14, 0.012);
+        let (a, b) = (p - d * back, p - d * front);
+        let _ = writeln!(
+            x,
+            "    <geom name=\"{LAMP_GEOM}\" class=\"decor\" type=\"cylinder\" size=\"{}\" fromto=\"{}\" material=\"lamp\"/>",
+            nums(&[r]),
+            nums(&[a.x, a.y, a.z, b.x, b.y, b.z])
+        );
+        let (a, b) = (p - d * front, p - d * (front - 0.002));
+        let _ = writeln!(
+            x,
+            "    <geom name=\"lamp-lens\" class=\"decor\" type=\"cylinder\" size=\"{}\" fromto=\"{}\" material=\"lamp-lens\"/>",
+            nums(&[0.85 * r]),
+            nums(&[a.x, a.y, a.z, b.x, b.y, b.z])
+        );
     }
 }
 

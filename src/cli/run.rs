@@ -81,6 +81,11 @@ pub struct RunArgs {
     /// controller keeps --config (how a calibration is tested against a hidden truth).
     #[arg(long, value_name = "TRUE.toml")]
     pub stub_config: Option<PathBuf>,
+    /// The simulated camera's scene: lab (the enclosure's twin, the studio light) or orbit (black
+    /// sky, the Earth, a Sun that follows the trajectory's Sun phase); overrides the lab
+    /// configuration's `[scene] kind` (docs/stub-scene.md).
+    #[arg(long, value_name = "lab|orbit")]
+    pub scene_kind: Option<hitl_trajectories::lab::SceneKind>,
     /// Inject a stub fault at a time into the run (repeatable): drop-connection, stall-reports,
     /// stall-replies, arm-error, deviation, estop, door-open; e.g. `--stub-fault estop@2.5`.
     #[arg(long = "stub-fault", value_name = "KIND@SECONDS")]
@@ -169,7 +174,7 @@ pub fn run(args: RunArgs, record: bool) -> u8 {
         );
         return exit::BAD_INPUT;
     }
-    let lab = match &args.config {
+    let mut lab = match &args.config {
         Some(path) => match LabConfig::load(path) {
             Ok(lab) => lab,
             Err(e) => {
@@ -179,6 +184,9 @@ pub fn run(args: RunArgs, record: bool) -> u8 {
         },
         None => LabConfig::default(),
     };
+    if let Some(kind) = args.scene_kind {
+        lab.scene.kind = kind;
+    }
     let target = match &args.arm {
         None => ArmTarget::Stub { faults: args.stub_faults.clone() },
         Some(host) => {

@@ -22,15 +22,16 @@ pub struct EmbeddedStub {
     camera_noise: hitl_sim_stub::camera::NoiseModel,
 }
 
-/// Start the stub on loopback for `lab`, with `target` (in model units) shown at `scale`, and
-/// `faults` scheduled from its start.
+/// Start the stub on loopback for `lab`, with `target` (in model units) shown at `scale`, the
+/// scene drawn as `scene` says, and `faults` scheduled from its start.
 pub fn start_stub(
     faults: &[StubFault],
     lab: &LabConfig,
     target: &hitl_perception::TargetModel,
     scale: f64,
+    scene: &hitl_sim_stub::mjcf::SceneOptions,
 ) -> Result<EmbeddedStub, DeviceError> {
-    let lab_model = LabModel::generated(lab, &stub_target(target, scale))
+    let lab_model = LabModel::generated_scene(lab, &stub_target(target, scale), scene)
         .map_err(|e| DeviceError::Failed(format!("stub scene: {e}")))?;
     let plant = MujocoPlant::from_lab_model(lab_model.clone());
     let arm = plant.shared_state();
@@ -102,6 +103,11 @@ impl EmbeddedStub {
     /// Where the stub serves the report stream `kind`, if it does.
     pub fn report_addr(&self, kind: super::arm::ReportKind) -> Option<SocketAddr> {
         self.handle.report_addr(kind)
+    }
+
+    /// The Sun's direction through the run, which the simulated camera reads (`orbit`).
+    pub fn sun_track(&self) -> &hitl_sim_stub::mujoco_plant::SunTrack {
+        &self.lab_model.sun_track
     }
 
     /// The scene the simulated camera, light and inputs share with the stub.

@@ -10,19 +10,28 @@
 //!
 //! The renderer owns a copy of the lab model, changed only in what drawing reads: the flange
 //! camera's intrinsics (focal lengths and principal point from the capture's [`Intrinsics`], the
-//! OpenCV pinhole model), the offscreen buffer size, the depth range (near 1 cm, far
-//! [`FAR_M`]: depth beyond is no return, 0), the Sun's brightness (the light level), the
+//! OpenCV pinhole model), the offscreen buffer size, the drawing range (near 1 cm, far
+//! [`FAR_M`] in `lab`, [`mjcf::ORBIT_DRAW_RANGE_M`] in `orbit` so the Earth is drawn; depth
+//! beyond [`FAR_M`] is no return, 0, in both), the Sun's brightness (the light level), the
 //! headlight (ambient only, as [`Shading::ambient`]), and geom groups: the camera's own body is
-//! hidden ([`HIDDEN_GROUP`]), the target's tree is drawn in [`TARGET_GROUP`]. The Sun casts no
-//! shadows for now: the lamp's own sphere sits where MuJoCo puts the directional light's shadow
-//! camera and would darken the whole scene (the ray cast's self-shadowing is not reproduced).
+//! hidden ([`HIDDEN_GROUP`]), the target's tree is drawn in [`TARGET_GROUP`], collision-only
+//! geoms ([`mjcf::COLLISION_ONLY_GROUP`]) are never drawn.
+//!
+//! Shadows: the Sun casts them (MuJoCo's shadow map, [`mjcf::SHADOW_MAP_SIZE`] texels; the
+//! keep-out sphere around the lamp is collision only, so it no longer blinds the light's shadow
+//! camera). In `orbit` the Sun is directional and its direction is set on the render thread's
+//! data before each capture, from the run's [`SunTrack`] at the capture's tick (or
+//! [`GlRenderer::set_sun_direction`]); its shadow camera is moved to the target's Sun side so
+//! the shadow map stays centred on the target. The mask pass draws no shadows.
 //!
 //! The EGL context belongs to the thread that made it: build and use a [`GlRenderer`] on one
 //! thread (the camera's render thread does).
 
 use super::render::{self, Image, Shading};
-use crate::mujoco_plant::LabModel;
+use crate::mjcf;
+use crate::mujoco_plant::{LabModel, SunTrack};
 use hitl_hal::{Intrinsics, Joints, DOF};
+use hitl_trajectories::lab::SceneKind;
 use mujoco_rs::prelude::{MjData, MjModel};
 use mujoco_rs::renderer::MjRenderer;
 use mujoco_rs::wrappers::mj_visualization::{MjvCamera, MjvOption};
@@ -61,6 +70,20 @@ pub struct GlRenderer {
     sun_specular: Option<[f32; 3]>,
     pub shading: Shading,
     target_depth: Vec<f32>,
+    scene_kind: SceneKind,
+    sun_track: SunTrack,
+    /// The loop tick of the capture being drawn (for the Sun track).
+    capture_tick: Option<u64>,
+    /// A fixed Sun direction (tests, benchmarks): wins over the track.
+    sun_override: Option<Vector3<f64>>,
+    /// The directional Sun's direction as the scene was written.
+    sun_default: Option<Vector3<f64>>,
+    /// The Sun direction the last capture was drawn with (`orbit`).
+    sun_used: Option<Vector3<f64>>,
+    /// Do the scene's lights cast shadows in the model now (off for the mask pass)?
+    shadows_on: bool,
+    /// Lights that cast shadows as the scene was written.
+    shadow_lights: Vec<usize>,
 }
 
 impl GlRenderer {
@@ -89,27 +112,32 @@ impl GlRenderer {
             } else if target_root.is_some_and(|r| m.body_rootid()[body] == r) {
                 m.geom_group_mut()[g] = TARGET_GROUP;
             } else if m.geom_group()[g] >= TARGET_GROUP {
-                m.geom_group_mut()[g] = 3;
+                m.geom_group_mut()[g] = 0;
             }
         }
         let extent = m.stat().extent.max(1e-6);
+        let draw_range = match lab.scene_kind {
+            SceneKind::Lab => FAR_M,
+            SceneKind::Orbit => mjcf::ORBIT_DRAW_RANGE_M,
+        };
         {
             let vis = m.vis_mut();
             vis.map.znear = (NEAR_M / extent) as f32;
-            vis.map.zfar = (FAR_M / extent) as f32;
+            vis.map.zfar = (draw_range / extent) as f32;
             vis.headlight.diffuse = [0.0; 3];
             vis.headlight.specular = [0.0; 3];
             // One sample per pixel, at its centre, like the ray cast and a camera's pixel grid:
             // multisampling (MuJoCo's default 4) costs about half the frame in software.
             vis.quality.offsamples = 0;
         }
-        if let Some(l) = lab.sun {
-            m.light_castshadow_mut()[l] = false;
-        }
         let (sun_diffuse, sun_specular) = match lab.sun {
             Some(l) => (Some(m.light_diffuse()[l]), Some(m.light_specular()[l])),
             None => (None, None),
         };
+        let sun_default = lab.sun.map(|l| Vector3::from(m.light_dir()[l]));
+        let shadow_lights: Vec<usize> =
+            (0..m.light_castshadow().len()).filter(|&l| m.light_castshadow()[l]).collect();
+        let (scene_kind, sun_track) = (lab.scene_kind, lab.sun_track.clone());
         let spare = Some(model.clone());
         let data = MjData::new(model);
         let mut r = Self {
@@ -122,6 +150,14 @@ impl GlRenderer {
             sun_specular,
             shading: Shading::default(),
             target_depth: Vec::new(),
+            scene_kind,
+            sun_track,
+            capture_tick: None,
+            sun_override: None,
+            sun_default,
+            sun_used: None,
+            shadows_on: true,
+            shadow_lights,
         };
         r.set_joints(&[0.0; DOF]);
         r.ensure_size(width.max(1), height.max(1))?;
@@ -166,6 +202,39 @@ impl GlRenderer {
         Ok(())
     }
 
+    /// The loop tick of the next capture: in `orbit` the Sun's direction is the run's
+    /// [`SunTrack`] at this tick.
+    pub fn set_capture_tick(&mut self, tick: u64) {
+        self.capture_tick = Some(tick);
+    }
+
+    /// Draw the `orbit` Sun travelling along `dir` (lab frame) from now on, whatever the track
+    /// says; `None` gives the track back.
+    pub fn set_sun_direction(&mut self, dir: Option<Vector3<f64>>) {
+        self.sun_override = dir.and_then(|d| d.try_normalize(1e-12));
+    }
+
+    /// The direction (lab frame, unit) the last `orbit` capture's sunlight travelled.
+    pub fn sun_direction(&self) -> Option<Vector3<f64>> {
+        self.sun_used
+    }
+
+    /// Turn the scene's shadows on or off (the mask pass needs none).
+    fn set_shadows(&mut self, on: bool) -> Result<(), GlError> {
+        if self.shadows_on == on || self.shadow_lights.is_empty() {
+            return Ok(());
+        }
+        let lights = std::mem::take(&mut self.shadow_lights);
+        let r = self.update_model(|m| {
+            for &l in &lights {
+                m.light_castshadow_mut()[l] = on;
+            }
+        });
+        self.shadow_lights = lights;
+        self.shadows_on = on;
+        r
+    }
+
     /// Put the arm at `q` and compute the kinematics.
     pub fn set_joints(&mut self, q: &Joints) {
         {
@@ -200,14 +269,18 @@ impl GlRenderer {
         self.ensure_size(intr.width, intr.height)?;
         let (w, h) = (intr.width as usize, intr.height as usize);
         let n = w * h;
+        self.set_shadows(true)?;
         self.place_camera(camera, intr, level, shift_px)?;
+        self.place_sun();
         let cam = self.camera;
         let Some((renderer, _)) = self.renderer.as_mut() else {
             return Err(GlError::Scene("renderer not built".into()));
         };
         let err = |e: mujoco_rs::renderer::RendererError| GlError::Scene(e.to_string());
-        // The whole scene (the camera's own body hidden).
-        let mut opts = MjvOption { geomgroup: [1, 1, 1, 1, 1, 0], ..Default::default() };
+        // The whole scene (the camera's own body and collision-only geoms hidden).
+        // (Sites are markers, not surfaces: none drawn.)
+        let mut opts =
+            MjvOption { geomgroup: [1, 1, 1, 0, 1, 0], sitegroup: [0; 6], ..Default::default() };
         renderer.set_opts(opts.clone());
         if !renderer.rgb_enabled() {
             renderer.set_rgb_rendering(true);
@@ -223,7 +296,12 @@ impl GlRenderer {
         };
         depth_m.resize(n, 0.0);
         // The target alone: where its depth is the scene's, the camera sees the target.
-        // (Depth only: not reading the colour back saves a fifth of the frame's time.)
+        // (Depth only: not reading the colour back saves a fifth of the frame's time; no
+        // shadow pass either.)
+        self.set_shadows(false)?;
+        let Some((renderer, _)) = self.renderer.as_mut() else {
+            return Err(GlError::Scene("renderer not built".into()));
+        };
         opts.geomgroup = [0, 0, 0, 0, 1, 0];
         renderer.set_opts(opts);
         renderer.set_rgb_rendering(false);
@@ -240,6 +318,25 @@ impl GlRenderer {
             .map(|(&z, &t)| if z > 0.0 && (t - z).abs() <= 1e-4 + 1e-4 * z { 255 } else { 0 })
             .collect();
         Ok(Image { intrinsics: *intr, color, depth_m, mask })
+    }
+
+    /// In `orbit`, point the Sun for this capture (fixed direction, else the track at the
+    /// capture's tick, else the scene's) and put its shadow camera on the target's Sun side.
+    /// Written on the data after the kinematics, as the camera's pose is.
+    fn place_sun(&mut self) {
+        let Some(l) = self.lab.sun.filter(|_| self.scene_kind == SceneKind::Orbit) else {
+            return;
+        };
+        let track = self.capture_tick.and_then(|t| self.sun_track.direction_at(t));
+        let Some(dir) = self.sun_override.or(track).or(self.sun_default) else { return };
+        let centre = match self.lab.target_body {
+            Some(b) => Vector3::from(self.data.xpos()[b]),
+            None => Vector3::from(self.data.light_xpos()[l]) + dir * mjcf::SUN_SHADOW_DISTANCE_M,
+        };
+        let pos = centre - dir * mjcf::SUN_SHADOW_DISTANCE_M;
+        self.data.light_xdir_mut()[l] = [dir.x, dir.y, dir.z];
+        self.data.light_xpos_mut()[l] = [pos.x, pos.y, pos.z];
+        self.sun_used = Some(dir);
     }
 
     /// Set the flange camera to `camera` with `intr`'s projection, and the Sun to `level`.

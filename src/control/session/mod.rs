@@ -253,7 +253,7 @@ pub fn run(req: RunRequest) -> Result<RunReport, RunError> {
     let runtime = io_runtime()?;
 
     // 2. The arm's side: the embedded stub, or the real box's address.
-    let target = start_arm_target(&req, &scene)?;
+    let target = start_arm_target(&req, &scene, &traj, &table)?;
 
     // 3. Devices besides the arm, opened, configured and started before the arm is enabled.
     let mut devices = open_and_start_devices(&req, &target, runtime.handle(), clock)?;
@@ -266,6 +266,11 @@ pub fn run(req: RunRequest) -> Result<RunReport, RunError> {
 
     // 6. The program: the approach from where the arm stands, then the trajectory.
     let program = build_program(&link.first.q, &table, &link.lab)?;
+    #[cfg(feature = "stub")]
+    if let Some(stub) = &target.stub {
+        // The `orbit` Sun at a capture's loop tick: playback starts after the approach.
+        stub.sun_track().set_playback_start(program.approach.len() as u64);
+    }
 
     // 7. Play it on the real-time thread (the loop borrows the arm and the devices).
     let played =
@@ -341,23 +346,39 @@ impl ArmTargetLink {
     }
 }
 
-fn start_arm_target(req: &RunRequest, scene: &TargetScene) -> Result<ArmTargetLink, RunError> {
+fn start_arm_target(
+    req: &RunRequest,
+    scene: &TargetScene,
+    traj: &Trajectory,
+    table: &SetpointTable,
+) -> Result<ArmTargetLink, RunError> {
     match &req.target {
         #[cfg(feature = "stub")]
         ArmTarget::Stub { faults } => {
+            // The scene as the lab configuration (or --scene-kind) says, its Earth along the
+            // plan's nadir, its Sun following the trajectory's Sun phase.
+            let look = hitl_sim_stub::mjcf::SceneOptions {
+                kind: req.lab.scene.kind,
+                rtn_to_base: crate::capture::sim_light::rtn_to_base(traj)
+                    .unwrap_or_else(hitl_trajectories::planner::mapping::default_rtn_to_base),
+            };
             let stub = start_stub(
                 faults,
                 req.stub_lab.as_ref().unwrap_or(&req.lab),
                 &scene.model,
                 scene.scale,
+                &look,
             )?
             .with_depth_model(req.depth_model, 0);
+            stub.sun_track().set_schedule(&crate::capture::sim_light::sun_schedule(
+                traj, table, &req.lab,
+            ));
             let cmd_addr = stub.cmd_addr();
             Ok(ArmTargetLink { cmd_addr, report_host: cmd_addr.ip(), stub: Some(stub) })
         }
         #[cfg(not(feature = "stub"))]
         ArmTarget::Stub { .. } => {
-            let _ = scene;
+            let _ = (scene, traj, table);
             Err(RunError::BadInput("this build has no embedded stub: pass --arm HOST".into()))
         }
         ArmTarget::Remote { host } => {
