@@ -20,4 +20,4 @@ pub mod target_look;
 
 pub use faults::{Fault, FaultKind, SimInputs, SimInputsReader};
 pub use server::bench::{bench_protocol, BenchError, BenchOptions};
-pub use server::{Stub, StubConfig, StubError, StubHandle};
+pub use server::{Stub, StubConfig, StubError, StubHandle, ThreadStart};

@@ -24,18 +24,33 @@ pub struct EmbeddedStub {
 
 /// Start the stub on loopback for `lab`, with `target` (in model units) shown at `scale`, the
 /// scene drawn as `scene` says, and `faults` scheduled from its start.
+///
+/// `fifo_priority` is the run loop's SCHED_FIFO priority, if it has one. A box has CPUs of its
+/// own; the embedded stub shares the run's, so its threads (physics, command and report ports)
+/// run just below the loop and its report reader (`fifo_priority - 2`): rendering, perception
+/// and recording on the normal scheduler then cannot make the simulated arm lag its commands,
+/// which the controller would rightly stop as a joint deviation.
 pub fn start_stub(
     faults: &[StubFault],
     lab: &LabConfig,
     target: &hitl_perception::TargetModel,
     scale: f64,
     scene: &hitl_sim_stub::mjcf::SceneOptions,
+    fifo_priority: Option<i32>,
 ) -> Result<EmbeddedStub, DeviceError> {
     let lab_model = LabModel::generated_scene(lab, &stub_target(target, scale), scene)
         .map_err(|e| DeviceError::Failed(format!("stub scene: {e}")))?;
     let plant = MujocoPlant::from_lab_model(lab_model.clone());
     let arm = plant.shared_state();
-    let config = StubConfig { faults: faults.to_vec(), ..StubConfig::ephemeral() };
+    let thread_start = match fifo_priority {
+        Some(p) => hitl_sim_stub::ThreadStart::new(move || {
+            // Refused (no privilege), the threads stay on the normal scheduler, as the loop's
+            // own report already says real-time was refused.
+            let _ = crate::rt::os::set_fifo_priority((p - 2).max(1));
+        }),
+        None => hitl_sim_stub::ThreadStart::default(),
+    };
+    let config = StubConfig { faults: faults.to_vec(), thread_start, ..StubConfig::ephemeral() };
     let handle = Stub::start(config, Box::new(plant))
         .map_err(|e| DeviceError::Failed(format!("stub: {e}")))?;
     Ok(EmbeddedStub {

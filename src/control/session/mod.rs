@@ -112,11 +112,11 @@ pub struct RunRequest {
     pub camera_size: Option<(u32, u32)>,
     /// Target model: a built-in name (asymmetric, one-plane, two-planes) or an OBJ/STL path.
     pub target_model: String,
-    /// How the simulated camera's depth is degraded (`--depth-model`).
-    pub depth_model: crate::devices::SimDepthModel,
     /// SITL: the lab the embedded stub simulates (`--stub-config`), when it is not the one the
     /// controller believes (`lab`): the truth a calibration must recover.
     pub stub_lab: Option<LabConfig>,
+    /// How the simulated camera's depth is degraded (`--depth-model`).
+    pub depth_model: crate::devices::SimDepthModel,
     pub rt: RtOptions,
     pub plain_progress: bool,
     /// Stream the run to Foxglove (`--live`; needs `record`: the recorder feeds it).
@@ -368,11 +368,11 @@ fn start_arm_target(
                 &scene.model,
                 scene.scale,
                 &look,
+                req.rt.fifo_priority,
             )?
             .with_depth_model(req.depth_model, 0);
-            stub.sun_track().set_schedule(&crate::capture::sim_light::sun_schedule(
-                traj, table, &req.lab,
-            ));
+            stub.sun_track()
+                .set_schedule(&crate::capture::sim_light::sun_schedule(traj, table, &req.lab));
             let cmd_addr = stub.cmd_addr();
             Ok(ArmTargetLink { cmd_addr, report_host: cmd_addr.ip(), stub: Some(stub) })
         }
