@@ -10,9 +10,12 @@
 //! EGL device [`SimCamera::new`] fails with [`SimCameraError::NoRenderer`] naming the missing
 //! Debian package, before anything moves.
 //!
-//! At each trigger the render thread takes the exposure: it samples the plant's measured joints
-//! ([`SharedArmState`]) and the light level ([`LightLevel`]) as the request arrives, then renders
-//! with its own `MjData`. Next to each frame it keeps a [`RenderTruth`] (the joints it rendered
+//! The exposure happens at the trigger, as a hardware-triggered camera's does: `trigger` (called
+//! by the tick) samples the plant's measured joints ([`SharedArmState`], a lock-free load), the
+//! light level ([`LightLevel`]) and the clock, and queues them with the request; the render
+//! thread then renders that exposure with its own `MjData`, however late it gets to it (the
+//! readout). A render backlog therefore delays delivery, never moves the exposure away from
+//! its trigger; a full queue refuses the capture (`Busy`). Next to each frame it keeps a [`RenderTruth`] (the joints it rendered
 //! at, the camera pose with and without noise) for ground truth: [`SimCamera::poll_sim_frame`]
 //! returns both, [`SimCamera::last_truth`] gives the truth of the frame `poll_frame` returned last.
 //!
@@ -31,7 +34,7 @@ pub use intrinsics::Preset;
 pub use noise::{DepthModel, FrameNoise, NoiseModel, StereoDepth};
 pub use render::{Image, Renderer, Shading};
 
-use crate::mujoco_plant::{LabModel, SharedArmState};
+use crate::mujoco_plant::{ArmSample, LabModel, SharedArmState};
 use crossbeam::atomic::AtomicCell;
 use crossbeam::channel::{self, Receiver, Sender, TryRecvError, TrySendError};
 use hitl_hal::{
@@ -148,9 +151,24 @@ impl hitl_hal::Error for SimCameraError {
     }
 }
 
+/// One capture as exposed at its trigger, waiting for the render thread.
+#[derive(Debug, Clone, Copy)]
+struct Exposure {
+    request: CaptureRequest,
+    /// The arm as measured at the trigger.
+    sample: ArmSample,
+    /// Host clock at the trigger.
+    exposure_ns: u64,
+    /// Light level at the trigger.
+    level: f32,
+}
+
 /// The simulated RGB-D camera.
 pub struct SimCamera {
-    requests: Option<Sender<CaptureRequest>>,
+    requests: Option<Sender<Exposure>>,
+    arm: SharedArmState,
+    light: LightLevel,
+    clock: MonotonicClock,
     /// The intrinsics the render thread uses for its next capture.
     stream: Arc<AtomicCell<Intrinsics>>,
     frames: Receiver<(RgbdFrame, RenderTruth)>,
@@ -192,10 +210,7 @@ impl SimCamera {
         let (worker_stream, worker_dropped) = (stream.clone(), dropped.clone());
         let worker = move |renderer| Worker {
             renderer,
-            arm,
-            light,
             noise: config.noise,
-            clock: config.clock,
             stream: worker_stream,
             frames: frame_tx,
             dropped: worker_dropped,
@@ -221,6 +236,9 @@ impl SimCamera {
         }
         Ok(Self {
             requests: Some(req_tx),
+            arm,
+            light,
+            clock: config.clock,
             stream,
             frames: frame_rx,
             thread: Some(thread),
@@ -287,14 +305,21 @@ impl RgbdCamera for SimCamera {
         Ok(())
     }
 
-    /// Hands the request to the render thread's bounded queue (`try_send`: no allocation, no
-    /// blocking). A full queue refuses the capture with [`SimCameraError::Busy`].
+    /// Exposes now (samples the arm, the light and the clock) and hands the exposure to the
+    /// render thread's bounded queue (`try_send`: no allocation, no blocking). A full queue
+    /// refuses the capture with [`SimCameraError::Busy`].
     fn trigger(&mut self, request: CaptureRequest) -> Result<(), SimCameraError> {
         if !self.armed {
             return Err(SimCameraError::NotArmed);
         }
         let tx = self.requests.as_ref().ok_or(SimCameraError::Disconnected)?;
-        match tx.try_send(request) {
+        let exposure = Exposure {
+            request,
+            sample: self.arm.load(),
+            exposure_ns: self.clock.now_ns(),
+            level: self.light.get(),
+        };
+        match tx.try_send(exposure) {
             Ok(()) => Ok(()),
             Err(TrySendError::Full(_)) => Err(SimCameraError::Busy(request.tick)),
             Err(TrySendError::Disconnected(_)) => Err(SimCameraError::Disconnected),
@@ -405,32 +430,26 @@ impl Draw for GlRenderer {
 /// The render thread's state.
 struct Worker {
     renderer: Backend,
-    arm: SharedArmState,
-    light: LightLevel,
     noise: NoiseModel,
-    clock: MonotonicClock,
     stream: Arc<AtomicCell<Intrinsics>>,
     frames: Sender<(RgbdFrame, RenderTruth)>,
     dropped: Arc<AtomicU64>,
 }
 
 impl Worker {
-    fn run(mut self, requests: Receiver<CaptureRequest>) {
-        while let Ok(request) = requests.recv() {
+    fn run(mut self, exposures: Receiver<Exposure>) {
+        while let Ok(exposure) = exposures.recv() {
             // A renderer that fails after it opened ends the thread: the camera then reports
             // itself disconnected at the next poll, which faults the run.
-            let Ok(out) = self.capture(request) else { return };
+            let Ok(out) = self.capture(exposure) else { return };
             if self.frames.try_send(out).is_err() {
                 self.dropped.fetch_add(1, Ordering::Relaxed);
             }
         }
     }
 
-    fn capture(&mut self, request: CaptureRequest) -> Result<(RgbdFrame, RenderTruth), String> {
-        // The exposure: what the arm and the light are doing as the trigger arrives.
-        let sample = self.arm.load();
-        let exposure_ns = self.clock.now_ns();
-        let level = self.light.get();
+    fn capture(&mut self, exposure: Exposure) -> Result<(RgbdFrame, RenderTruth), String> {
+        let Exposure { request, sample, exposure_ns, level } = exposure;
         let mut noise = self.noise.draw(request.tick);
         let intr = self.stream.load();
         let (image, truth) = match &mut self.renderer {

@@ -212,3 +212,42 @@ fn threaded_camera_renders_at_the_plant_joints() {
         .count();
     assert!(busy >= 1);
 }
+
+#[test]
+fn the_exposure_is_taken_at_the_trigger_not_when_the_render_thread_gets_to_it() {
+    let lab = LabConfig::default();
+    let mut plant = MujocoPlant::new(&lab, None).expect("plant");
+    let q1 = look_at_target(&lab, 0.3);
+    plant.reset(&q1);
+    let light = LightLevel::new(0.8);
+    let config = SimCameraConfig {
+        intrinsics: Preset::Wfov.at(160, 128),
+        queue: 2,
+        ..SimCameraConfig::default()
+    };
+    let mut cam = SimCamera::new(plant.lab_model(), plant.shared_state(), light.clone(), config)
+        .expect("camera");
+    cam.arm_trigger().expect("arm");
+    // Two captures back to back: the render thread is still drawing the first when the arm and
+    // the light change, so a camera that exposed when it got to the second would show the change.
+    cam.trigger(CaptureRequest { tick: 1, fired_ns: 0 }).expect("trigger 1");
+    cam.trigger(CaptureRequest { tick: 2, fired_ns: 0 }).expect("trigger 2");
+    let mut q2 = q1;
+    q2[0] += 0.2;
+    plant.reset(&q2);
+    light.set(0.1);
+    let deadline = Instant::now() + Duration::from_secs(20);
+    let mut truths = Vec::new();
+    while truths.len() < 2 {
+        if let Some((frame, truth)) = cam.poll_sim_frame().expect("poll") {
+            assert_eq!(frame.request.tick, truth.tick);
+            truths.push(truth);
+        }
+        assert!(Instant::now() < deadline, "frames missing: {}", truths.len());
+        std::thread::sleep(Duration::from_millis(1));
+    }
+    for t in &truths {
+        assert_eq!(t.q, q1, "capture {} shows the arm after its trigger", t.tick);
+        assert_eq!(t.light_level, 0.8, "capture {} lit after its trigger", t.tick);
+    }
+}
