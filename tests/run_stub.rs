@@ -278,7 +278,13 @@ fn a_190_ms_reply_stall_is_ridden_through_and_a_longer_one_holds() {
     let _one = ONE_AT_A_TIME.lock().unwrap_or_else(|e| e.into_inner());
     let dir = tempfile::tempdir().expect("tempdir");
     let lab = dir.path().join("lab.toml");
-    std::fs::write(&lab, "[interlocks]\nreport_timeout_ms = 150\n").expect("write");
+    // The deviation limit is widened from 0.08 to 0.1 rad: this trajectory's joint 1 runs about
+    // 0.4 rad/s at 1.2 s, so a 190 ms stall leaves it ~0.076 rad behind its command, and on a
+    // loaded 2-core CI machine one late tick took it to 0.081 and tripped the deviation
+    // interlock (seen once in `make test`). What this test checks is the reply-stall policy;
+    // the deviation threshold has tests of its own.
+    std::fs::write(&lab, "[interlocks]\nreport_timeout_ms = 150\nmax_deviation_rad = 0.1\n")
+        .expect("write");
     let lab = lab.to_str().expect("utf-8");
     let (code, all, events) = run_fault("stall-replies:0.19@1.2", Some(lab));
     assert_eq!(code, 0, "{all}");
