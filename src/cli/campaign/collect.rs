@@ -196,6 +196,8 @@ pub fn markdown(rows: &[Row]) -> String {
             "median e_r [deg]",
             "GT mean e_t [m]",
             "GT mean e_r [deg]",
+            "e_t / range",
+            "goal",
         ]
         .map(String::from),
     );
@@ -212,9 +214,27 @@ pub fn markdown(rows: &[Row]) -> String {
         cells.push(f(r.metric("median_er_deg"), 2));
         cells.push(f(r.baseline_metric("mean_et_m"), 4));
         cells.push(f(r.baseline_metric("mean_er_deg"), 2));
+        let (share, goal) = goal(r);
+        cells.push(share);
+        cells.push(goal);
         out.push_str(&format!("| {} |\n", cells.join(" | ")));
     }
     out
+}
+
+/// The paper's accuracy goal for a row: mean e_t at most 1 % of the range and mean e_r at most
+/// 1.5 deg. Returns e_t as a share of the range and "met" / "missed" ("-" without a range or
+/// metrics, e.g. a failed case).
+fn goal(r: &Row) -> (String, String) {
+    let range = r.param_text("range_m").parse::<f64>().ok().filter(|x| *x > 0.0);
+    match (range, r.metric("mean_et_m"), r.metric("mean_er_deg")) {
+        (Some(range), Some(et), Some(er)) => {
+            let share = et / range;
+            let met = share <= 0.01 && er <= 1.5;
+            (format!("{:.3} %", 100.0 * share), if met { "met" } else { "missed" }.to_string())
+        }
+        _ => ("-".to_string(), "-".to_string()),
+    }
 }
 
 /// Run `hitl campaign collect DIR`.
