@@ -82,7 +82,10 @@ pub fn run(args: EvalArgs) -> u8 {
                         g("backend_resets")
                     );
                 }
-                crate::outln!("ground truth from: {}", g("calibration").as_str().unwrap_or("nominal"));
+                crate::outln!(
+                    "ground truth from: {}",
+                    g("calibration").as_str().unwrap_or("nominal")
+                );
                 crate::outln!(
                     "frames {} (failures {}), scale {}\n\
                      e_t real m: mean {} median {} std {}\n\

@@ -71,16 +71,16 @@ pub struct RunArgs {
     /// Target model: asymmetric, one-plane, two-planes (built in) or an OBJ/STL file.
     #[arg(long, default_value = "asymmetric", value_name = "NAME|FILE")]
     pub target_model: String,
+    /// SITL: the lab the embedded stub simulates (camera mount, target pose, board), while the
+    /// controller keeps --config (how a calibration is tested against a hidden truth).
+    #[arg(long, value_name = "TRUE.toml")]
+    pub stub_config: Option<PathBuf>,
     /// The simulated camera's depth: ideal (as rendered, every surface pixel exact; the SITL
     /// accuracy figures' setting) or orbbec (the Gemini 305's stereo depth: error growing with
     /// z^2, no depth at edges, in the projector's shadow and at grazing angles;
     /// docs/sim-camera.md).
     #[arg(long, default_value = "ideal", value_name = "ideal|orbbec")]
     pub depth_model: crate::devices::SimDepthModel,
-    /// SITL: the lab the embedded stub simulates (camera mount, target pose, board), while the
-    /// controller keeps --config (how a calibration is tested against a hidden truth).
-    #[arg(long, value_name = "TRUE.toml")]
-    pub stub_config: Option<PathBuf>,
     /// The simulated camera's scene: lab (the enclosure's twin, the studio light) or orbit (black
     /// sky, the Earth, a Sun that follows the trajectory's Sun phase); overrides the lab
     /// configuration's `[scene] kind` (docs/stub-scene.md).
@@ -225,7 +225,9 @@ pub fn run(args: RunArgs, record: bool) -> u8 {
     let stub_lab = match &args.stub_config {
         None => None,
         Some(_) if args.arm.is_some() => {
-            crate::errln!("hitl run: --stub-config only applies to the embedded stub, not to --arm");
+            crate::errln!(
+                "hitl run: --stub-config only applies to the embedded stub, not to --arm"
+            );
             return exit::BAD_INPUT;
         }
         Some(path) => match LabConfig::load(path) {
@@ -252,8 +254,8 @@ pub fn run(args: RunArgs, record: bool) -> u8 {
         camera_preset: args.camera_preset,
         camera_size: args.camera_size,
         target_model: args.target_model,
-        depth_model: args.depth_model,
         stub_lab,
+        depth_model: args.depth_model,
         rt: RtOptions {
             fifo_priority: (args.rt_priority > 0).then_some(args.rt_priority),
             lock_memory: true,
