@@ -17,9 +17,9 @@ echo "== hitl check (preflight)"
 $HITL check "$OUT/flyaround-10m.npz"
 
 echo
-echo "== hitl run on the embedded MuJoCo stub, recording to $OUT/run.mcap"
-$HITL run "$OUT/flyaround-10m.npz" --record "$OUT/run.mcap" --camera sim --camera-preset wfov \
-  --camera-size 320x256 --light sim --perception icp --plain
+echo "== hitl run on the embedded MuJoCo stub (lab scene, Orbbec camera at 1280x800), recording to $OUT/run.mcap"
+$HITL run "$OUT/flyaround-10m.npz" --record "$OUT/run.mcap" --camera sim --camera-preset orbbec --camera-size 1280x800 \
+  --scene-kind lab --light sim --perception icp --plain
 
 echo
 echo "== hitl report"
@@ -29,4 +29,4 @@ echo
 echo "== hitl eval (the paper's metrics: e_t in real metres, e_r in degrees)"
 $HITL eval "$OUT/run.mcap"
 echo
-echo "Report: $OUT/report/index.html"
+echo "Report (with the contact sheet of frames and silhouettes): $OUT/report/index.html"
