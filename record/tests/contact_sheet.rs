@@ -136,7 +136,7 @@ fn outlines_lie_on_the_mask_boundary_and_an_offset_estimate_is_drawn_that_far_aw
     let out = dir.path().join("report");
     let model = |_: &BTreeMap<String, String>| Ok(square());
     let opts = ReportOptions {
-        contact: ContactOptions { frames: 4, max_width: 480, model: Some(&model) },
+        contact: ContactOptions { frames: 4, max_width: 480, model: Some(&model), zoom: None },
     };
     let r = write_report_with(&path, Some(&out), &opts).expect("report");
 

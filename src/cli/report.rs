@@ -28,6 +28,11 @@ pub struct ReportArgs {
     /// Contact sheet frames wider than this are shrunk to it (pixels, at least 16).
     #[arg(long, default_value_t = 480, value_parser = clap::value_parser!(u32).range(16..))]
     pub contact_width: u32,
+    /// Show each contact-sheet frame cropped around the target: its ground-truth mask's box grown
+    /// Z times (at least 1), at the frame's aspect ratio. Without it, whole frames (at a
+    /// fly-around's range a wide camera shows the target a few dozen pixels wide).
+    #[arg(long, value_name = "Z")]
+    pub contact_zoom: Option<f64>,
 }
 
 /// The run's target model in lab metres, as `hitl run` and `hitl eval` build it: the `target_model`
@@ -47,11 +52,16 @@ fn run_target(run: &BTreeMap<String, String>) -> Result<TargetMesh, String> {
 
 pub fn run(args: ReportArgs) -> u8 {
     let dir = args.out.clone().unwrap_or_else(|| default_out_dir(&args.recording));
+    if let Some(z) = args.contact_zoom.filter(|z| !(z.is_finite() && *z >= 1.0)) {
+        crate::errln!("hitl report: --contact-zoom {z} must be a number of at least 1");
+        return exit::BAD_INPUT;
+    }
     let opts = ReportOptions {
         contact: ContactOptions {
             frames: args.contact_frames,
             max_width: args.contact_width,
             model: Some(&run_target),
+            zoom: args.contact_zoom,
         },
     };
     match write_report_with(&args.recording, Some(&dir), &opts) {

@@ -55,11 +55,15 @@ pub struct ContactOptions<'a> {
     pub max_width: u32,
     /// The target model, for the estimated silhouette (and the ground truth without a mask).
     pub model: Option<ModelSource<'a>>,
+    /// Show each frame cropped around the target (its ground-truth mask's box, grown this many
+    /// times, at the frame's aspect ratio) instead of whole: at a fly-around's range a wide
+    /// camera shows the target a few dozen pixels wide. `None`: whole frames.
+    pub zoom: Option<f64>,
 }
 
 impl Default for ContactOptions<'_> {
     fn default() -> Self {
-        ContactOptions { frames: 8, max_width: 480, model: None }
+        ContactOptions { frames: 8, max_width: 480, model: None, zoom: None }
     }
 }
 
@@ -503,23 +507,30 @@ pub fn write_contact_sheet(
     for &i in &chosen {
         let (t, k) = captures[i];
         let px = pixels.remove(&t).unwrap_or_default();
-        let (w, h) = (k.width, k.height);
-        let (ow, oh) = sheet_size(w, h, opts.max_width);
-        let sized = |img: Option<fg::RawImage>| img.filter(|m| (m.width, m.height) == (w, h));
+        let (fw, fh) = (k.width, k.height);
+        let sized = |img: Option<fg::RawImage>| img.filter(|m| (m.width, m.height) == (fw, fh));
         let (color, depth, mask) = (sized(px.color), sized(px.depth), sized(px.mask));
         let background = color
             .as_ref()
             .and_then(rgb_of)
             .or_else(|| depth.as_ref().and_then(depth_grey))
-            .unwrap_or_else(|| vec![0; w as usize * h as usize * 3]);
+            .unwrap_or_else(|| vec![0; fw as usize * fh as usize * 3]);
+        let mask = mask
+            .filter(|m| m.encoding == "mono8")
+            .and_then(|m| Silhouette::from_mono8(fw, fh, &packed(&m, 1)?));
+        // The window shown: the whole frame, or (zoom) a crop around the target's mask.
+        let window = opts
+            .zoom
+            .and_then(|z| mask.as_ref().and_then(|m| zoom_window(m, z)))
+            .unwrap_or((0, 0, fw, fh));
+        let (background, mask, k) = crop(&background, mask, &k, window);
+        let (w, h) = (k.width, k.height);
+        let (ow, oh) = sheet_size(w, h, opts.max_width);
         let mut rgb = shrink_u8(&background, 3, (w, h), (ow, oh));
         let sk = scaled_intrinsics(&k, ow, oh);
         let gt_pose = pose_at(&rec.pose_gt, t);
         let est_pose = pose_at(&rec.pose_estimate, t);
-        let mask = mask
-            .filter(|m| m.encoding == "mono8")
-            .and_then(|m| Silhouette::from_mono8(w, h, &packed(&m, 1)?))
-            .map(|s| shrink_silhouette(&s, ow, oh));
+        let mask = mask.map(|s| shrink_silhouette(&s, ow, oh));
         let model_gt = model.as_ref().zip(gt_pose).map(|(m, p)| rasterize(m, &p, &sk));
         let model_mask_iou = mask.as_ref().zip(model_gt.as_ref()).and_then(|(a, b)| a.iou(b));
         let (gt, source) = match (mask, model_gt) {
@@ -557,6 +568,71 @@ pub fn write_contact_sheet(
         });
     }
     Ok((sheet, files))
+}
+
+/// The crop (x0, y0, width, height) around a silhouette's bounding box grown `zoom` times, at
+/// the frame's aspect ratio, inside the frame; `None` for an empty silhouette or a window that
+/// would be the whole frame anyway.
+fn zoom_window(s: &Silhouette, zoom: f64) -> Option<(u32, u32, u32, u32)> {
+    let (mut x0, mut y0, mut x1, mut y1) = (u32::MAX, u32::MAX, 0, 0);
+    for y in 0..s.height {
+        for x in 0..s.width {
+            if s.get(x, y) {
+                (x0, y0, x1, y1) = (x0.min(x), y0.min(y), x1.max(x), y1.max(y));
+            }
+        }
+    }
+    if x0 > x1 || !(zoom.is_finite() && zoom >= 1.0) {
+        return None;
+    }
+    let aspect = f64::from(s.width) / f64::from(s.height);
+    let (bw, bh) = (f64::from(x1 - x0 + 1) * zoom, f64::from(y1 - y0 + 1) * zoom);
+    let cw = bw.max(bh * aspect).max(32.0).min(f64::from(s.width));
+    let ch = (cw / aspect).min(f64::from(s.height));
+    let (cw, ch) = (cw.round() as u32, ch.round() as u32);
+    if cw >= s.width {
+        return None;
+    }
+    let centre = |lo: u32, hi: u32, size: u32, full: u32| {
+        let c = (f64::from(lo) + f64::from(hi)) / 2.0 - f64::from(size) / 2.0;
+        c.round().clamp(0.0, f64::from(full - size)) as u32
+    };
+    Some((centre(x0, x1, cw, s.width), centre(y0, y1, ch, s.height), cw, ch))
+}
+
+/// The frame's colour, mask and intrinsics cut to `window` (x0, y0, width, height).
+fn crop(
+    rgb: &[u8],
+    mask: Option<Silhouette>,
+    k: &Intrinsics,
+    (x0, y0, cw, ch): (u32, u32, u32, u32),
+) -> (Vec<u8>, Option<Silhouette>, Intrinsics) {
+    if (x0, y0, cw, ch) == (0, 0, k.width, k.height) {
+        return (rgb.to_vec(), mask, *k);
+    }
+    let w = k.width as usize;
+    let mut out = Vec::with_capacity(cw as usize * ch as usize * 3);
+    for y in y0..y0 + ch {
+        let row = (y as usize * w + x0 as usize) * 3;
+        out.extend_from_slice(&rgb[row..row + cw as usize * 3]);
+    }
+    let mask = mask.map(|m| {
+        let mut c = Silhouette::empty(cw, ch);
+        for y in 0..ch {
+            for x in 0..cw {
+                c.inside[(y * cw + x) as usize] = m.get(x0 + x, y0 + y);
+            }
+        }
+        c
+    });
+    let kc = Intrinsics {
+        width: cw,
+        height: ch,
+        cx: k.cx - f64::from(x0),
+        cy: k.cy - f64::from(y0),
+        ..*k
+    };
+    (out, mask, kc)
 }
 
 /// Remove the `.png` files of an earlier sheet (fewer captures now would leave them behind).
@@ -642,6 +718,31 @@ mod tests {
         let iou = shrunk.iou(&direct).expect("same size");
         assert!(iou > 0.97, "IoU {iou}");
         assert!(direct.area() > 2000, "{}", direct.area());
+    }
+
+    #[test]
+    fn the_zoom_crops_around_the_mask_at_the_frames_aspect_and_moves_the_principal_point() {
+        // A 10x5 target at (100..110, 50..55) in a 320x160 frame, zoomed 4x: a 40x20 window
+        // (2:1 like the frame) centred on it.
+        let mut m = Silhouette::empty(320, 160);
+        for y in 50..55 {
+            for x in 100..110 {
+                m.inside[y * 320 + x] = true;
+            }
+        }
+        let win = zoom_window(&m, 4.0).expect("window");
+        assert_eq!(win, (85, 42, 40, 20));
+        let rgb: Vec<u8> = (0..320 * 160 * 3).map(|i| (i / 3 % 320) as u8).collect();
+        let (c, cm, ck) = crop(&rgb, Some(m.clone()), &k(320, 160, 100.0), win);
+        assert_eq!((ck.width, ck.height, ck.cx, ck.cy), (40, 20, 159.5 - 85.0, 79.5 - 42.0));
+        assert_eq!(c.len(), 40 * 20 * 3);
+        assert_eq!(c[0], 85); // the first pixel of the crop is column 85 of the frame
+        let cm = cm.expect("mask");
+        assert_eq!(cm.area(), m.area());
+        assert!(cm.get(100 - 85, 50 - 42) && !cm.get(0, 0));
+        // An empty mask, or a zoom that would show the whole frame, keeps the whole frame.
+        assert_eq!(zoom_window(&Silhouette::empty(320, 160), 4.0), None);
+        assert_eq!(zoom_window(&m, 100.0), None);
     }
 
     #[test]
