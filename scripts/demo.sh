@@ -9,21 +9,23 @@ HITL=./target/release/hitl
 OUT=${OUT:-runs/demo}
 mkdir -p "$OUT"
 
-echo "== hitl plan: 10 m fly-around, 20 s, a capture every 5th waypoint"
-$HITL plan --preset flyaround --range-m 10 --duration-s 20 --capture-every 5 --out "$OUT/flyaround-10m.npz"
+echo "== hitl plan: 10 m fly-around, 20 s, a capture every 5th waypoint, the Sun behind the chaser"
+# The Sun in ECI -x lights the side the chaser sees (the default, +x, backlights this orbit).
+$HITL plan --preset flyaround --range-m 10 --duration-s 20 --capture-every 5 --sun-eci=-1,0,0 \
+  --out "$OUT/flyaround-10m.npz"
 
 echo
 echo "== hitl check (preflight)"
 $HITL check "$OUT/flyaround-10m.npz"
 
 echo
-echo "== hitl run on the embedded MuJoCo stub (lab scene, Orbbec camera at 1280x800), recording to $OUT/run.mcap"
+echo "== hitl run on the embedded MuJoCo stub (orbit scene, Orbbec camera at 1280x800), recording to $OUT/run.mcap"
 $HITL run "$OUT/flyaround-10m.npz" --record "$OUT/run.mcap" --camera sim --camera-preset orbbec --camera-size 1280x800 \
-  --scene-kind lab --light sim --perception icp --plain
+  --scene-kind orbit --light sim --perception icp --plain
 
 echo
 echo "== hitl report"
-$HITL report "$OUT/run.mcap" --out "$OUT/report"
+$HITL report "$OUT/run.mcap" --out "$OUT/report" --contact-zoom 4
 
 echo
 echo "== hitl eval (the paper's metrics: e_t in real metres, e_r in degrees)"
