@@ -6,6 +6,9 @@
 //!
 //! `HITL_SCENE_DUMP=DIR` writes every image drawn here to DIR as PPM, to look at.
 
+mod cube_lab;
+
+use cube_lab::{box_corners, BOX_TRIANGLES};
 use hitl_hal::Intrinsics;
 use hitl_sim_stub::camera::{GlRenderer, Image, Preset};
 use hitl_sim_stub::mjcf::{self, SceneOptions, TargetModel};
@@ -16,35 +19,14 @@ use nalgebra::{Isometry3, Point3, Translation3, UnitQuaternion, Vector3};
 const W: u32 = 96;
 const H: u32 = 64;
 
-/// Two boxes in one mesh, `[lo, hi]` corners each.
+/// Boxes in one mesh, `[lo, hi]` corners each.
 fn boxes(parts: &[([f32; 3], [f32; 3])]) -> TargetModel {
     let mut v = Vec::new();
     let mut f = Vec::new();
     for (lo, hi) in parts {
         let o = v.len() as u32;
-        for i in 0..8 {
-            v.push([
-                if i & 1 == 0 { lo[0] } else { hi[0] },
-                if i & 2 == 0 { lo[1] } else { hi[1] },
-                if i & 4 == 0 { lo[2] } else { hi[2] },
-            ]);
-        }
-        for t in [
-            [0, 2, 1],
-            [1, 2, 3],
-            [4, 5, 6],
-            [5, 7, 6],
-            [0, 1, 4],
-            [1, 5, 4],
-            [2, 6, 3],
-            [3, 6, 7],
-            [0, 4, 2],
-            [2, 4, 6],
-            [1, 3, 5],
-            [3, 7, 5],
-        ] {
-            f.push([o + t[0], o + t[1], o + t[2]]);
-        }
+        v.extend(box_corners(*lo, *hi));
+        f.extend(BOX_TRIANGLES.map(|t| t.map(|i| o + i)));
     }
     TargetModel { mesh: Some((v, f)), greatest_dimension_m: 0.16, parts: Vec::new() }
 }

@@ -13,7 +13,8 @@ fn err<E: std::fmt::Display>(e: E) -> String {
     e.to_string()
 }
 
-const JOINT_COLORS: [RGBColor; 7] = [
+/// The series colours of every plot (the report's joints, the campaign plots' targets).
+pub const PALETTE: [RGBColor; 7] = [
     RGBColor(31, 119, 180),
     RGBColor(255, 127, 14),
     RGBColor(44, 160, 44),
@@ -23,8 +24,8 @@ const JOINT_COLORS: [RGBColor; 7] = [
     RGBColor(227, 119, 194),
 ];
 
-/// A range covering the values, never empty.
-fn span(values: impl Iterator<Item = f64>) -> Range<f64> {
+/// An axis range covering the finite values with 5 % margins, never empty.
+pub fn span(values: impl Iterator<Item = f64>) -> Range<f64> {
     let (mut lo, mut hi) = (f64::INFINITY, f64::NEG_INFINITY);
     for v in values.filter(|v| v.is_finite()) {
         lo = lo.min(v);
@@ -143,7 +144,7 @@ pub fn tracking_error(rec: &Recording, out: &Path) -> Res {
         .build_cartesian_2d(xs, ys.clone())
         .map_err(err)?;
     chart.configure_mesh().x_desc("t (s)").y_desc("deg").draw().map_err(err)?;
-    for (j, c) in JOINT_COLORS.iter().enumerate() {
+    for (j, c) in PALETTE.iter().enumerate() {
         chart
             .draw_series(LineSeries::new(
                 e.iter().map(|p| (p.0, p.1[j].to_degrees())),

@@ -14,9 +14,9 @@
 
 use super::collect::Row;
 use super::manifest::parse_window;
+use hitl_record::report::plots::{span, PALETTE};
 use plotters::prelude::*;
 use std::collections::BTreeMap;
-use std::ops::Range;
 use std::path::{Path, PathBuf};
 
 type Res<T> = Result<T, String>;
@@ -24,15 +24,6 @@ type Res<T> = Result<T, String>;
 fn err<E: std::fmt::Display>(e: E) -> String {
     e.to_string()
 }
-
-const COLORS: [RGBColor; 6] = [
-    RGBColor(31, 119, 180),
-    RGBColor(255, 127, 14),
-    RGBColor(44, 160, 44),
-    RGBColor(214, 39, 40),
-    RGBColor(148, 103, 189),
-    RGBColor(140, 86, 75),
-];
 
 /// One point of a series: x, mean, std (estimator) and baseline mean.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -81,22 +72,6 @@ pub fn series(
         pts.sort_by(|a, b| a.x.total_cmp(&b.x));
     }
     out
-}
-
-fn span(values: impl Iterator<Item = f64>) -> Range<f64> {
-    let (mut lo, mut hi) = (f64::INFINITY, f64::NEG_INFINITY);
-    for v in values.filter(|v| v.is_finite()) {
-        lo = lo.min(v);
-        hi = hi.max(v);
-    }
-    if !lo.is_finite() {
-        return 0.0..1.0;
-    }
-    if hi - lo < 1e-12 {
-        return (lo - 1.0)..(hi + 1.0);
-    }
-    let pad = (hi - lo) * 0.06;
-    (lo - pad)..(hi + pad)
 }
 
 /// A number as a short axis label.
@@ -181,7 +156,7 @@ fn sweep(
             .draw()
             .map_err(err)?;
         for (i, (target, pts)) in data.iter().enumerate() {
-            let color = COLORS[i % COLORS.len()];
+            let color = PALETTE[i % PALETTE.len()];
             let line: Vec<(f64, f64)> = pts.iter().map(|p| (tx(p.x), p.mean)).collect();
             c.draw_series(LineSeries::new(line.clone(), color.stroke_width(2)))
                 .map_err(err)?
