@@ -7,6 +7,9 @@
 //! flange poses the recording holds (forward kinematics of the joints at exposure) and writes the
 //! lab configuration with the recovered camera mount and target pose and a `[calibration]`
 //! provenance block, atomically (a temporary file renamed into place: a refusal leaves nothing).
+//! The views' trajectory and recording live in a temporary folder removed on exit unless
+//! `--record` keeps the recording; `--from-recording` solves such a recording again without
+//! moving anything (other thresholds, a corrected board definition).
 //!
 //! Refusals, each with its reason and remedy (docs/calibration.md): 3 the solution's residuals or
 //! conditioning are poor (noise; views too alike); [`TOO_FEW_VIEWS`] fewer usable views than the
@@ -83,6 +86,11 @@ pub struct CalibrateArgs {
     /// Keep the captures: record the calibration run to this MCAP file.
     #[arg(long, value_name = "FILE.mcap")]
     pub record: Option<PathBuf>,
+    /// Move nothing: solve the captures of an earlier calibration run (a file written with
+    /// `--record`) again, e.g. with another --max-rms-px or a corrected --board. The planning,
+    /// arm and camera options do not apply.
+    #[arg(long, value_name = "FILE.mcap", conflicts_with_all = ["arm", "stub_config", "record"])]
+    pub from_recording: Option<PathBuf>,
     /// Largest RMS reprojection error accepted, pixels.
     #[arg(long, default_value_t = Acceptance::default().max_rms_px, value_name = "PX")]
     pub max_rms_px: f64,
@@ -196,30 +204,6 @@ fn calibrate(args: CalibrateArgs) -> Result<(), Refusal> {
             "--stub-config only applies to the embedded stub, not to --arm",
         );
     }
-    if !(MIN_PLANNED_VIEWS..=views::MAX_VIEWS).contains(&args.views) {
-        return refuse(
-            TOO_FEW_VIEWS,
-            format!(
-                "--views {}: plan {MIN_PLANNED_VIEWS} to {} views",
-                args.views,
-                views::MAX_VIEWS
-            ),
-        );
-    }
-    let mut stub_lab = match &args.stub_config {
-        Some(_) => Some(load_lab(&args.stub_config, "--stub-config")?),
-        None => None,
-    };
-    // The board is on the mount in the simulated lab too, where its own [board] (or ours) says.
-    if let Some(s) = stub_lab.as_mut() {
-        s.board.get_or_insert_with(|| placement.clone());
-    }
-    let mut lab_with_board = lab.clone();
-    lab_with_board.board = Some(placement.clone());
-    // Without a hidden truth, the stub simulates the controller's lab, board included.
-    if args.arm.is_none() && stub_lab.is_none() {
-        stub_lab = Some(lab_with_board.clone());
-    }
     let size = parse_size(&args.camera_size)?;
     let k = hitl_sim_stub::camera::Preset::from_name(&args.camera_preset)
         .ok_or_else(|| {
@@ -230,105 +214,26 @@ fn calibrate(args: CalibrateArgs) -> Result<(), Refusal> {
         })?
         .at(size.0, size.1);
 
-    // 1. The views, each solved and in view; refused before anything moves if too few.
-    let plan = ViewPlan { count: args.views, ..ViewPlan::default() };
-    let (planned, dropped) = views::plan_views(&lab_with_board, &board, &k, &plan);
-    for d in &dropped {
-        crate::errln!("note: view {} dropped: {}", d.index + 1, d.reason);
-    }
-    if planned.len() < MIN_PLANNED_VIEWS {
-        return refuse(
-            TOO_FEW_VIEWS,
-            format!(
-                "only {} of {} views are reachable with the whole board in the image (at least \
-                 {MIN_PLANNED_VIEWS} are needed); nothing moved. Check the board's placement in \
-                 [board] and the target pose, or ask for more views (--views)",
-                planned.len(),
-                args.views
-            ),
-        );
-    }
-    let traj = views::trajectory(&planned, &lab_with_board, &plan);
-    let dir = tempfile_dir()?;
-    let npz = dir.join("calibration-views.npz");
-    hitl_trajectories::npz::save(&npz, &traj, true)
-        .map_err(|e| Refusal(exit::BAD_INPUT, format!("writing the views' trajectory: {e}")))?;
-    let table = SetpointTable::build(&traj, 250.0, 1.0)
-        .map_err(|e| Refusal(exit::BAD_INPUT, format!("timing the views' trajectory: {e}")))?;
-    let report = preflight::check(&traj, &table, &lab);
-    if !report.is_safe() {
-        let lines: Vec<String> = report.violations.iter().map(|v| v.message.clone()).collect();
-        return refuse(
-            exit::PREFLIGHT_REFUSED,
-            format!(
-                "preflight refused the views' trajectory; nothing moved:\n{}",
-                lines.join("\n")
-            ),
-        );
-    }
-    crate::outln!(
-        "calibration: {} views of {}, {:.1} s of motion",
-        planned.len(),
-        board.describe(),
-        traj.duration()
-    );
-
-    // 2. Play them through the run session, recording the captures.
-    let record = args.record.clone().unwrap_or_else(|| dir.join("calibration.mcap"));
-    let target = match &args.arm {
-        None => ArmTarget::Stub { faults: Vec::new() },
-        Some(host) => {
-            if !args.yes && !confirm(host) {
-                return refuse(
-                    exit::BAD_INPUT,
-                    format!(
-                        "not confirmed that the enclosure around {host} is clear; nothing moved"
-                    ),
-                );
-            }
-            ArmTarget::Remote { host: host.clone() }
+    // 1-2. The views planned, played and recorded; or the recording of an earlier run.
+    let mut _scratch = None;
+    let (record, unreadable) = match &args.from_recording {
+        Some(path) => {
+            crate::outln!(
+                "calibration: solving the captures of {} (nothing moves)",
+                path.display()
+            );
+            (path.clone(), exit::BAD_INPUT)
+        }
+        None => {
+            let dir = Scratch::new()?;
+            let record = play_views(&args, &lab, &placement, &board, &k, size, dir.path())?;
+            _scratch = Some(dir);
+            (record, exit::DEVICE)
         }
     };
-    let request = RunRequest {
-        trajectory: npz.clone(),
-        waypoint_rate_hz: None,
-        lab: lab.clone(),
-        rate_hz: 250.0,
-        speed_scale: 1.0,
-        target,
-        record: Some(record.clone()),
-        record_compression: hitl_record::RecorderConfig::default().compression,
-        camera: args.camera,
-        light: args.light.clone(),
-        perception: BackendSpec::None,
-        reregister: ReregisterPolicy::default(),
-        camera_preset: args.camera_preset.clone(),
-        camera_size: Some(size),
-        target_model: "asymmetric".into(),
-        stub_lab,
-        depth_model: Default::default(),
-        rt: RtOptions {
-            fifo_priority: (args.rt_priority > 0).then_some(args.rt_priority),
-            lock_memory: true,
-            cpu: None,
-            spin: Duration::ZERO,
-        },
-        plain_progress: args.plain || !std::io::stderr().is_terminal(),
-        live: None,
-    };
-    match session::run(request) {
-        Ok(r) if r.exit_code == exit::OK => {}
-        Ok(r) => {
-            return refuse(
-                r.exit_code,
-                format!("the views' run did not complete:\n{}", r.summary()),
-            )
-        }
-        Err(e) => return refuse(e.exit_code(), e.to_string()),
-    }
 
     // 3. Detect the board in every capture, with the flange pose at its exposure.
-    let (views_seen, k_rec) = read_views(&record, &board)?;
+    let (views_seen, k_rec) = read_views(&record, &board, unreadable)?;
     let k = k_rec.unwrap_or(k);
     let acc = Acceptance { max_rms_px: args.max_rms_px, ..Acceptance::default() };
     judge_detections(&views_seen, &board, &acc)?;
@@ -409,6 +314,141 @@ fn calibrate(args: CalibrateArgs) -> Result<(), Refusal> {
     Ok(())
 }
 
+/// Plans the views (refused before anything moves if too few are reachable with the board whole
+/// in the image), preflights them as one trajectory and plays it through the run session,
+/// recording the captures; returns the recording's path (in `dir` unless `--record`).
+fn play_views(
+    args: &CalibrateArgs,
+    lab: &LabConfig,
+    placement: &BoardPlacement,
+    board: &Board,
+    k: &Intrinsics,
+    size: (u32, u32),
+    dir: &Path,
+) -> Result<PathBuf, Refusal> {
+    if !(MIN_PLANNED_VIEWS..=views::MAX_VIEWS).contains(&args.views) {
+        return refuse(
+            TOO_FEW_VIEWS,
+            format!(
+                "--views {}: plan {MIN_PLANNED_VIEWS} to {} views",
+                args.views,
+                views::MAX_VIEWS
+            ),
+        );
+    }
+    let mut stub_lab = match &args.stub_config {
+        Some(_) => Some(load_lab(&args.stub_config, "--stub-config")?),
+        None => None,
+    };
+    // The board is on the mount in the simulated lab too, where its own [board] (or ours) says.
+    if let Some(s) = stub_lab.as_mut() {
+        s.board.get_or_insert_with(|| placement.clone());
+    }
+    let mut lab_with_board = lab.clone();
+    lab_with_board.board = Some(placement.clone());
+    // Without a hidden truth, the stub simulates the controller's lab, board included.
+    if args.arm.is_none() && stub_lab.is_none() {
+        stub_lab = Some(lab_with_board.clone());
+    }
+
+    // 1. The views, each solved and in view; refused before anything moves if too few.
+    let plan = ViewPlan { count: args.views, ..ViewPlan::default() };
+    let (planned, dropped) = views::plan_views(&lab_with_board, board, k, &plan);
+    for d in &dropped {
+        crate::errln!("note: view {} dropped: {}", d.index + 1, d.reason);
+    }
+    if planned.len() < MIN_PLANNED_VIEWS {
+        return refuse(
+            TOO_FEW_VIEWS,
+            format!(
+                "only {} of {} views are reachable with the whole board in the image (at least \
+                 {MIN_PLANNED_VIEWS} are needed); nothing moved. Check the board's placement in \
+                 [board] and the target pose, or ask for more views (--views)",
+                planned.len(),
+                args.views
+            ),
+        );
+    }
+    let traj = views::trajectory(&planned, &lab_with_board, &plan);
+    let npz = dir.join("calibration-views.npz");
+    hitl_trajectories::npz::save(&npz, &traj, true)
+        .map_err(|e| Refusal(exit::BAD_INPUT, format!("writing the views' trajectory: {e}")))?;
+    let table = SetpointTable::build(&traj, 250.0, 1.0)
+        .map_err(|e| Refusal(exit::BAD_INPUT, format!("timing the views' trajectory: {e}")))?;
+    let report = preflight::check(&traj, &table, lab);
+    if !report.is_safe() {
+        let lines: Vec<String> = report.violations.iter().map(|v| v.message.clone()).collect();
+        return refuse(
+            exit::PREFLIGHT_REFUSED,
+            format!(
+                "preflight refused the views' trajectory; nothing moved:\n{}",
+                lines.join("\n")
+            ),
+        );
+    }
+    crate::outln!(
+        "calibration: {} views of {}, {:.1} s of motion",
+        planned.len(),
+        board.describe(),
+        traj.duration()
+    );
+
+    // 2. Play them through the run session, recording the captures.
+    let record = args.record.clone().unwrap_or_else(|| dir.join("calibration.mcap"));
+    let target = match &args.arm {
+        None => ArmTarget::Stub { faults: Vec::new() },
+        Some(host) => {
+            if !args.yes && !confirm(host) {
+                return refuse(
+                    exit::BAD_INPUT,
+                    format!(
+                        "not confirmed that the enclosure around {host} is clear; nothing moved"
+                    ),
+                );
+            }
+            ArmTarget::Remote { host: host.clone() }
+        }
+    };
+    let request = RunRequest {
+        trajectory: npz.clone(),
+        waypoint_rate_hz: None,
+        lab: lab.clone(),
+        rate_hz: 250.0,
+        speed_scale: 1.0,
+        target,
+        record: Some(record.clone()),
+        record_compression: hitl_record::RecorderConfig::default().compression,
+        camera: args.camera,
+        light: args.light.clone(),
+        perception: BackendSpec::None,
+        reregister: ReregisterPolicy::default(),
+        camera_preset: args.camera_preset.clone(),
+        camera_size: Some(size),
+        target_model: "asymmetric".into(),
+        stub_lab,
+        depth_model: Default::default(),
+        rt: RtOptions {
+            fifo_priority: (args.rt_priority > 0).then_some(args.rt_priority),
+            lock_memory: true,
+            cpu: None,
+            spin: Duration::ZERO,
+        },
+        plain_progress: args.plain || !std::io::stderr().is_terminal(),
+        live: None,
+    };
+    match session::run(request) {
+        Ok(r) if r.exit_code == exit::OK => {}
+        Ok(r) => {
+            return refuse(
+                r.exit_code,
+                format!("the views' run did not complete:\n{}", r.summary()),
+            )
+        }
+        Err(e) => return refuse(e.exit_code(), e.to_string()),
+    }
+    Ok(record)
+}
+
 /// Refuse captures that cannot be solved: no tag of the board anywhere ([`NEVER_DETECTED`]), or
 /// the board whole in too few of them ([`BOARD_OUT_OF_VIEW`]).
 fn judge_detections(views_seen: &[View], board: &Board, acc: &Acceptance) -> Result<(), Refusal> {
@@ -479,12 +519,21 @@ fn utc_now() -> String {
     format!("{y:04}-{m:02}-{d:02}T{:02}:{:02}:{:02}Z", rem / 3600, rem % 3600 / 60, rem % 60)
 }
 
-/// A private temporary folder for the views' trajectory and recording (kept until exit).
-fn tempfile_dir() -> Result<PathBuf, Refusal> {
-    let dir = std::env::temp_dir().join(format!("hitl-calibrate-{}", std::process::id()));
-    std::fs::create_dir_all(&dir)
-        .map_err(|e| Refusal(exit::DEVICE, format!("cannot create {}: {e}", dir.display())))?;
-    Ok(dir)
+/// A private temporary folder for the views' trajectory and recording, removed when dropped.
+struct Scratch(tempfile::TempDir);
+
+impl Scratch {
+    fn new() -> Result<Self, Refusal> {
+        tempfile::Builder::new()
+            .prefix("hitl-calibrate-")
+            .tempdir()
+            .map(Scratch)
+            .map_err(|e| Refusal(exit::DEVICE, format!("cannot create a temporary folder: {e}")))
+    }
+
+    fn path(&self) -> &Path {
+        self.0.path()
+    }
 }
 
 fn confirm(host: &str) -> bool {
@@ -499,9 +548,13 @@ fn confirm(host: &str) -> bool {
 
 /// The recording's colour captures, each with the flange pose at its exposure (from `/tf`) and
 /// the board corners found in it; and the camera's intrinsics as recorded.
-fn read_views(path: &Path, board: &Board) -> Result<(Vec<View>, Option<Intrinsics>), Refusal> {
+fn read_views(
+    path: &Path,
+    board: &Board,
+    code: u8,
+) -> Result<(Vec<View>, Option<Intrinsics>), Refusal> {
     let bad = |m: String| {
-        Refusal(exit::DEVICE, format!("reading the calibration recording {}: {m}", path.display()))
+        Refusal(code, format!("reading the calibration recording {}: {m}", path.display()))
     };
     let rec = reader::read_recording(path).map_err(|e| bad(e.to_string()))?;
     let mut images: Vec<(u64, fg::RawImage)> = Vec::new();
