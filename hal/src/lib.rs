@@ -6,6 +6,7 @@
 //! Every trait is also implemented for `&mut T` (as embedded-hal does), so the real-time loop
 //! can borrow its devices from the session instead of owning them, and for `Box<T>`, so a run can
 //! hold a device chosen at run time as a trait object.
+//! [`Pose`] (module [`pose`]) is the workspace's one rigid-transform type.
 //! Nothing here does I/O or allocates on its own; drivers live in `hitl-drivers` and `hitl-sim-stub`.
 
 pub mod arm;
@@ -15,6 +16,7 @@ pub mod error;
 pub mod inputs;
 pub mod lifecycle;
 pub mod light;
+pub mod pose;
 pub mod trigger;
 
 pub use arm::{Arm, ArmReports, ArmState, Joints, DOF};
@@ -26,6 +28,7 @@ pub use error::{Error, ErrorKind, ErrorType};
 pub use inputs::{InputState, Inputs};
 pub use lifecycle::Lifecycle;
 pub use light::Light;
+pub use pose::Pose;
 pub use trigger::{FireReport, Trigger, TriggerLines};
 
 #[cfg(test)]
