@@ -3,21 +3,16 @@
 //! metres, a 5 degree rotation is 5 degrees, a frame without an estimate is a failure; the JSON
 //! carries the keys and `--per-frame` lists every frame.
 
-use hitl_hal::Intrinsics;
-use hitl_record::{FrameRecord, Pose, PoseStamped, Recorder, RunMetadata};
+use hitl_hal::{Intrinsics, Pose};
+use hitl_record::{FrameRecord, PoseStamped, Recorder, RunMetadata};
 use nalgebra::{Isometry3, Translation3, UnitQuaternion, Vector3};
 use std::path::Path;
 
 mod common;
 use common::{hitl, num};
 
-fn pose(iso: &Isometry3<f64>) -> Pose {
-    let m = iso.to_homogeneous();
-    Pose::from_matrix(&std::array::from_fn(|i| std::array::from_fn(|j| m[(i, j)])))
-}
-
 /// Ground truth of frame k: the target 1 m ahead, drifting and turning a little each frame.
-fn gt(k: usize) -> Isometry3<f64> {
+fn gt(k: usize) -> Pose {
     Isometry3::from_parts(
         Translation3::new(0.01 * k as f64, -0.02, 1.0 + 0.05 * k as f64),
         UnitQuaternion::from_euler_angles(0.1 * k as f64, 0.2, -0.05 * k as f64),
@@ -43,7 +38,7 @@ fn write_recording(path: &Path, scale: Option<f64>) {
             color: None,
             depth: None,
             mask: None,
-            gt_pose: Some(pose(&gt(k))),
+            gt_pose: Some(gt(k)),
             tf: None,
             trigger_ns: None,
         };
@@ -59,7 +54,7 @@ fn write_recording(path: &Path, scale: Option<f64>) {
         };
         // Estimate = truth with the error in the target frame, then the estimator's offset.
         let est = gt(k) * error * offset;
-        tel.push_pose_estimate(&PoseStamped { capture_ns: t, pose: pose(&est) });
+        tel.push_pose_estimate(&PoseStamped { capture_ns: t, pose: est });
     }
     handle.finish().expect("recording closes");
 }

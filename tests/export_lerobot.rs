@@ -9,11 +9,9 @@
 use hitl::export::episode::Stream;
 use hitl::export::tables::{Column, Table};
 use hitl::export::video::{format_of, DepthQuant};
-use hitl_hal::Intrinsics;
+use hitl_hal::{Intrinsics, Pose};
 use hitl_record::reader::read_recording;
-use hitl_record::{
-    DepthImage, FrameRecord, Plane, Pose, PoseStamped, Recorder, RunMetadata, TfMsg,
-};
+use hitl_record::{DepthImage, FrameRecord, Plane, PoseStamped, Recorder, RunMetadata, TfMsg};
 use serde_json::Value;
 use std::path::{Path, PathBuf};
 use std::process::Command;
@@ -136,7 +134,7 @@ fn a_stub_run_exports_to_a_dataset_the_validator_accepts_one_row_and_frame_per_c
     let medians = v["masked_depth_median_m"].as_array().expect("depth medians");
     assert_eq!(medians.len() as u64, captures);
     for (m, gt) in medians.iter().zip(&rec.pose_gt) {
-        let z = gt.pose.translation[2];
+        let z = gt.pose.translation.z;
         let d = m.as_f64().expect("the mask covers the target in every frame");
         assert!((d - z).abs() < size, "median depth {d} m, target centre at {z} m, size {size} m");
     }
@@ -175,8 +173,7 @@ fn synthetic(path: &Path, n: u64, (w, h): (u32, u32), depth_m: impl Fn(u64) -> f
         let mask: Vec<u8> = (0..px).map(|i| if inside(i) { 255 } else { 0 }).collect();
         let depth: Vec<f32> = (0..px).map(|i| if inside(i) { depth_m(k) } else { 0.0 }).collect();
         let t = 1_000_000_000 + k * 100_000_000;
-        let pose =
-            Pose { translation: [0.0, 0.0, f64::from(depth_m(k))], rotation: [0.0, 0.0, 0.0, 1.0] };
+        let pose = Pose::translation(0.0, 0.0, f64::from(depth_m(k)));
         let frame = FrameRecord {
             tick: 10 * k,
             capture_ns: t,
@@ -187,8 +184,8 @@ fn synthetic(path: &Path, n: u64, (w, h): (u32, u32), depth_m: impl Fn(u64) -> f
             gt_pose: Some(pose),
             tf: Some(TfMsg {
                 t_ns: t,
-                base_flange: Pose::IDENTITY,
-                flange_camera: Pose::IDENTITY,
+                base_flange: Pose::identity(),
+                flange_camera: Pose::identity(),
                 base_target: pose,
             }),
             trigger_ns: Some(t - 1_000_000),

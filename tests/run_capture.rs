@@ -100,8 +100,8 @@ fn one_image_set_and_one_ground_truth_per_capture_and_the_truth_lands_on_the_mas
         // Bounding box of the vertices projected through the ground truth and the intrinsics.
         let (mut plo, mut phi) = ([f64::MAX; 2], [f64::MIN; 2]);
         for p in &vertices {
-            let [x, y, z] =
-                gt.pose.transform_point([f64::from(p[0]), f64::from(p[1]), f64::from(p[2])]);
+            let q = nalgebra::Point3::new(f64::from(p[0]), f64::from(p[1]), f64::from(p[2]));
+            let [x, y, z]: [f64; 3] = gt.pose.transform_point(&q).coords.into();
             assert!(z > 0.0, "the target is in front of the camera");
             let (u, v) = (f * x / z + cx - 0.5, f * y / z + cy - 0.5);
             plo = [plo[0].min(u), plo[1].min(v)];

@@ -4,7 +4,7 @@
 
 use hitl_perception::testing::{intrinsics_hfov, look_pose, render};
 use hitl_perception::TargetModel;
-use hitl_record::{DepthImage, FrameRecord, Plane, Pose, PoseStamped, Recorder, RunMetadata};
+use hitl_record::{DepthImage, FrameRecord, Plane, PoseStamped, Recorder, RunMetadata};
 
 fn main() -> Result<(), Box<dyn std::error::Error>> {
     let out = std::env::args().nth(1).ok_or("usage: synthetic_recording OUT.mcap")?;
@@ -17,7 +17,6 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     for i in 0..20u64 {
         let gt = look_pose(0.5, 0.3, -0.2, 0.8 + 0.02 * i as f64);
         let f = render(&mesh, &gt, &k, 1_000_000 * (i + 1));
-        let m: [[f64; 4]; 4] = std::array::from_fn(|r| std::array::from_fn(|c| gt[(r, c)]));
         let plane = |data| Plane { width: k.width, height: k.height, data };
         while !tel.frame_queue_has_room() {
             std::thread::sleep(std::time::Duration::from_millis(2));
@@ -33,13 +32,13 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
                 data: f.depth_m.clone(),
             })),
             mask: f.mask.clone().map(plane),
-            gt_pose: Some(Pose::from_matrix(&m)),
+            gt_pose: Some(gt),
             tf: None,
             trigger_ns: None,
         });
-        let mut est = Pose::from_matrix(&m);
+        let mut est = gt;
         if i > 0 {
-            est.translation[0] += 0.002;
+            est.translation.x += 0.002;
         }
         tel.push_pose_estimate(&PoseStamped { capture_ns: f.timestamp_ns, pose: est });
     }

@@ -14,7 +14,7 @@ use crate::{EstimateKind, PoseEstimator, TargetModel};
 use std::time::Instant;
 
 /// Pose of the target at frame `i` of the fly-around (camera circling and bobbing).
-fn fly_around(i: usize, range: f64) -> crate::pose::Pose {
+fn fly_around(i: usize, range: f64) -> hitl_hal::Pose {
     let a = (i as f64) * 0.6f64.to_radians();
     look_pose(range, 0.35 + 0.2 * (0.05 * i as f64).sin(), -0.25, 0.7 + a)
 }

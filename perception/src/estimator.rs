@@ -2,8 +2,8 @@
 
 use crate::icp::{IcpConfig, IcpTracker};
 use crate::models::Mesh;
-use crate::pose::Pose;
 use crate::{PerceptionError, PerceptionFrame};
+use hitl_hal::Pose;
 use std::path::PathBuf;
 
 /// How an estimate came about.

@@ -12,8 +12,8 @@
 //! is the first frame with a usable estimate; frames before it are failures. Statistics use the
 //! population standard deviation (numpy's default, ddof = 0).
 
-use crate::pose::{self, Pose};
 use crate::PerceptionError;
+use hitl_hal::pose::{self, Pose};
 use serde::Serialize;
 
 /// Ground truth and the estimator's answer for one frame (both target-in-camera, lab metres).
@@ -64,9 +64,8 @@ pub fn is_valid_estimate(t: &Pose) -> bool {
 
 /// Translation (real metres) and rotation (degrees) error of a corrected estimate.
 pub fn frame_error(corr: &Pose, gt: &Pose, scale: f64) -> (f64, f64) {
-    let et_lab = (pose::translation(corr) - pose::translation(gt)).norm();
-    let r = pose::rotation(corr).transpose() * pose::rotation(gt);
-    (et_lab / scale, pose::rotation_angle(&r).to_degrees())
+    let (et_lab, er) = pose::difference(corr, gt);
+    (et_lab / scale, er.to_degrees())
 }
 
 /// Scores a run. `pairs` must be in capture order; `scale` = lab metres per real metre (> 0).
@@ -98,7 +97,7 @@ pub fn evaluate(pairs: &[PosePair], scale: f64) -> Result<Metrics, PerceptionErr
         };
         let offset = *dt.get_or_insert_with(|| {
             reference = Some(p.timestamp_ns);
-            pose::inverse(est) * p.gt
+            est.inverse() * p.gt
         });
         let (et_m, er_deg) = frame_error(&(est * offset), &p.gt, scale);
         per_frame.push(FrameError { timestamp_ns: p.timestamp_ns, et_m, er_deg });

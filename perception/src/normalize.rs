@@ -38,9 +38,7 @@ pub fn normalize_frame(frame: &PerceptionFrame) -> Result<(PerceptionFrame, f64)
 /// Scales an estimate made on a normalised frame back to the original scene (`t = k * t'`).
 pub fn unscale_estimate(mut e: Estimate, k: f64) -> Estimate {
     if let Some(p) = e.pose.as_mut() {
-        for r in 0..3 {
-            p[(r, 3)] *= k;
-        }
+        p.translation.vector *= k;
     }
     e.residual_m *= k;
     e

@@ -1,9 +1,9 @@
 //! Perspective-n-point: the pose of known 3D points from their pixels. Direct linear transform on
 //! normalised data for a first guess, then Gauss-Newton on the reprojection error.
 
-use crate::pose::{self, Pose};
+use crate::pose::from_rt;
 use crate::PerceptionError;
-use hitl_hal::Intrinsics;
+use hitl_hal::{Intrinsics, Pose};
 use nalgebra::{DMatrix, Matrix3, SymmetricEigen, Vector3, Vector6};
 
 /// Pose of the body whose points `body` (body frame, metres) appear at `pixels` (u, v).
@@ -87,12 +87,12 @@ fn dlt(body: &[Vector3<f64>], rays: &[(f64, f64)]) -> Result<Pose, PerceptionErr
     // Undo the normalisation: x ~ R (p - c)/s + t  =>  R p + (s t - R c), scaled by s.
     let t_body = s * t - r * c;
     // The sign of the null vector is fixed by det(R) = +1 (which also puts the points in front).
-    Ok(pose::from_rt(&r, &t_body))
+    Ok(from_rt(&r, &t_body))
 }
 
 fn residuals(body: &[Vector3<f64>], rays: &[(f64, f64)], t: &Pose) -> Vec<f64> {
-    let r = pose::rotation(t);
-    let tr = pose::translation(t);
+    let r = t.rotation.to_rotation_matrix();
+    let tr = t.translation.vector;
     let mut out = Vec::with_capacity(2 * body.len());
     for (p, (x, y)) in body.iter().zip(rays) {
         let q = r * p + tr;
@@ -141,6 +141,7 @@ fn refine(body: &[Vector3<f64>], rays: &[(f64, f64)], init: Pose) -> Pose {
     t
 }
 
+/// `t` moved by the twist `d` (rotation vector, then translation), applied on the camera side.
 fn perturb(t: &Pose, d: &Vector6<f64>) -> Pose {
-    pose::small_motion(&Vector3::new(d[0], d[1], d[2]), &Vector3::new(d[3], d[4], d[5])) * t
+    Pose::new(Vector3::new(d[3], d[4], d[5]), Vector3::new(d[0], d[1], d[2])) * t
 }

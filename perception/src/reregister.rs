@@ -116,8 +116,8 @@ impl Reregistering {
 mod tests {
     use super::*;
     use crate::estimator::EstimateKind;
-    use crate::pose::Pose;
     use hitl_hal::Intrinsics;
+    use hitl_hal::Pose;
     use std::sync::{Arc, Mutex};
 
     /// Answers from a script of (residual, lost) per frame and logs every call.

@@ -3,10 +3,9 @@
 //! colour image. Not a camera model: no noise, no lens distortion, no anti-aliasing.
 
 use crate::models::Mesh;
-use crate::pose::{self, Pose};
 use crate::PerceptionFrame;
-use hitl_hal::Intrinsics;
-use nalgebra::Vector3;
+use hitl_hal::{Intrinsics, Pose};
+use nalgebra::{Translation3, UnitQuaternion, Vector3};
 
 /// Intrinsics of a pinhole camera with a horizontal field of view of `hfov_deg`.
 pub fn intrinsics_hfov(width: u32, height: u32, hfov_deg: f64) -> Intrinsics {
@@ -26,8 +25,8 @@ pub fn render(mesh: &Mesh, pose: &Pose, k: &Intrinsics, timestamp_ns: u64) -> Pe
     let (w, h) = (k.width as usize, k.height as usize);
     let mut depth = vec![f32::INFINITY; w * h];
     let mut color = vec![0u8; w * h * 3];
-    let r = pose::rotation(pose);
-    let t = pose::translation(pose);
+    let r = pose.rotation.to_rotation_matrix();
+    let t = pose.translation.vector;
     let cam: Vec<Vector3<f64>> =
         mesh.vertices().iter().map(|v| r * Vector3::new(v[0], v[1], v[2]) + t).collect();
     let light = Vector3::new(0.3, -0.5, -1.0).normalize();
@@ -96,6 +95,6 @@ fn edge(a: (f64, f64), b: (f64, f64), c: (f64, f64)) -> f64 {
 /// A pose that looks at the target from `range` metres along the camera's +z, with the target
 /// rotated by `roll, pitch, yaw` (radians, XYZ order).
 pub fn look_pose(range: f64, roll: f64, pitch: f64, yaw: f64) -> Pose {
-    let r = nalgebra::Rotation3::from_euler_angles(roll, pitch, yaw);
-    pose::from_rt(r.matrix(), &Vector3::new(0.0, 0.0, range))
+    let r = UnitQuaternion::from_euler_angles(roll, pitch, yaw);
+    Pose::from_parts(Translation3::new(0.0, 0.0, range), r)
 }

@@ -3,7 +3,7 @@
 //! tests, then the `socket:PATH` backend end to end against the peer.
 #![allow(clippy::unwrap_used)]
 
-use hitl_perception::pose::{self, Pose};
+use hitl_hal::Pose;
 use hitl_perception::socket::SocketEstimator;
 use hitl_perception::testing::{intrinsics_hfov, look_pose, render};
 use hitl_perception::{
@@ -129,7 +129,7 @@ fn mesh() -> Mesh {
 fn frame(seq: u64, range_m: f64) -> PerceptionFrame {
     let k = intrinsics_hfov(W, H, 40.0);
     let mut p: Pose = look_pose(range_m, 0.4, -0.3, 0.9);
-    p[(0, 3)] = 0.1;
+    p.translation.x = 0.1;
     let mut f = render(&mesh(), &p, &k, 1_000 + seq);
     f.seq = seq;
     f
@@ -205,9 +205,9 @@ fn hitl_against_the_peer_registers_tracks_normalises_and_refuses_a_maskless_fram
         let e = est.estimate(f).unwrap_or_else(|e| panic!("{e}; peer log: {}", peer.log_text()));
         let p = e.pose.expect("a pose");
         let (_, centroid) = target(f);
-        let t = pose::translation(&p);
+        let t = p.translation.vector;
         assert!((t - centroid).norm() < 1e-5 * centroid.norm(), "frame {n}: {t:?} vs {centroid:?}");
-        assert!((pose::rotation(&p) - r_fixed).norm() < 1e-12);
+        assert!((p.rotation.to_rotation_matrix().into_inner() - r_fixed).norm() < 1e-12);
         kinds.push(e.kind);
         translations.push(t);
     }

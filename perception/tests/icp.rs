@@ -2,23 +2,20 @@
 //! single frames (full and partial views) and a short fly-around sequence.
 #![allow(clippy::unwrap_used)]
 
+use hitl_hal::Pose;
 use hitl_perception::icp::{IcpConfig, IcpTracker};
 use hitl_perception::metrics::{evaluate, frame_error, PosePair};
 use hitl_perception::models::SymmetryClass;
-use hitl_perception::pose::{self, Pose};
 use hitl_perception::testing::{intrinsics_hfov, look_pose, render};
 use hitl_perception::{EstimateKind, PerceptionFrame, PoseEstimator, TargetModel};
-use nalgebra::{Rotation3, Vector3};
+use nalgebra::{UnitQuaternion, Vector3};
 
 /// Smallest error over the target's proper symmetries (two mirror planes x=0, y=0 make a
 /// 180-degree turn about body z a symmetry).
 fn sym_errors(est: &Pose, gt: &Pose, sym: SymmetryClass) -> (f64, f64) {
     let mut best = frame_error(est, gt, 1.0);
     if sym == SymmetryClass::TwoPlanes {
-        let flip = pose::from_rt(
-            Rotation3::from_axis_angle(&Vector3::z_axis(), std::f64::consts::PI).matrix(),
-            &Vector3::zeros(),
-        );
+        let flip = Pose::rotation(Vector3::z() * std::f64::consts::PI);
         let e = frame_error(est, &(gt * flip), 1.0);
         if e.1 < best.1 {
             best = e;
@@ -52,7 +49,7 @@ fn registers_a_partial_view_cut_by_the_image_border() {
     let mesh = model.lab_mesh(0.1).unwrap();
     // Target centre 0.16 m to the right at 0.6 m: about a third of it leaves the image.
     let mut gt = look_pose(0.6, -0.5, 0.2, 2.0);
-    gt[(0, 3)] = 0.16;
+    gt.translation.x = 0.16;
     let frame = render(&mesh, &gt, &k, 1);
     let w = k.width as usize;
     let on_border =
@@ -175,8 +172,8 @@ fn a_symmetric_target_keeps_its_branch_through_an_occlusion() {
     let mesh = model.lab_mesh(scale).unwrap();
     let mut t = IcpTracker::new(&mesh, IcpConfig::default()).unwrap();
     let spin = |i: u64| {
-        let z = Rotation3::from_axis_angle(&Vector3::z_axis(), (25.0 * i as f64).to_radians());
-        look_pose(1.0, 0.5, -0.3, 0.2) * pose::from_rt(z.matrix(), &Vector3::zeros())
+        let z = UnitQuaternion::from_axis_angle(&Vector3::z_axis(), (25.0 * i as f64).to_radians());
+        look_pose(1.0, 0.5, -0.3, 0.2) * z
     };
     let mut pairs = Vec::new();
     for i in 0..10u64 {

@@ -1,14 +1,13 @@
 //! The paper's metrics against hand-computed cases.
 #![allow(clippy::unwrap_used)]
 
+use hitl_hal::Pose;
 use hitl_perception::metrics::{evaluate, median, std, PosePair};
-use hitl_perception::pose::{self, Pose};
-use nalgebra::{Rotation3, Vector3};
+use nalgebra::{Quaternion, Translation3, Unit, UnitQuaternion, Vector3};
 
 fn pose_of(axis: Vector3<f64>, angle_deg: f64, t: [f64; 3]) -> Pose {
-    let r =
-        Rotation3::from_axis_angle(&nalgebra::Unit::new_normalize(axis), angle_deg.to_radians());
-    pose::from_rt(r.matrix(), &Vector3::new(t[0], t[1], t[2]))
+    let r = UnitQuaternion::from_axis_angle(&Unit::new_normalize(axis), angle_deg.to_radians());
+    Pose::from_parts(Translation3::new(t[0], t[1], t[2]), r)
 }
 
 fn pair(ts: u64, gt: Pose, est: Option<Pose>) -> PosePair {
@@ -43,8 +42,8 @@ fn hand_computed_translation_and_rotation_errors_with_scale() {
     let gt1 = pose_of(Vector3::new(0.0, 1.0, 0.0), 30.0, [0.1, 0.0, 0.5]);
     let est1 = {
         let mut e = gt1 * pose_of(Vector3::z(), 2.0, [0.0, 0.0, 0.0]);
-        e[(0, 3)] += 0.003;
-        e[(1, 3)] += 0.004;
+        e.translation.x += 0.003;
+        e.translation.y += 0.004;
         e
     };
     let gt2 = pose_of(Vector3::z(), 0.0, [0.0, 0.1, 0.6]);
@@ -77,7 +76,7 @@ fn failures_are_counted_and_the_reference_is_the_first_usable_estimate() {
     let gt = |k: u64| pose_of(Vector3::y(), k as f64, [0.0, 0.0, 1.0 + 0.01 * k as f64]);
     let off = pose_of(Vector3::x(), 5.0, [0.0, 0.01, 0.0]);
     let mut nan = gt(3) * off;
-    nan[(0, 0)] = f64::NAN;
+    nan.translation.x = f64::NAN;
     let pairs = vec![
         pair(0, gt(0), None),                   // no estimate
         pair(1, gt(1), Some(Pose::identity())), // identity = lost
@@ -103,7 +102,7 @@ fn rejects_bad_scale_and_bad_ground_truth() {
     assert!(evaluate(&[pair(0, gt, Some(gt))], 0.0).is_err());
     assert!(evaluate(&[pair(0, gt, Some(gt))], f64::NAN).is_err());
     let mut bad = gt;
-    bad[(0, 0)] = 2.0;
+    bad.rotation = Unit::new_unchecked(Quaternion::new(2.0, 0.0, 0.0, 0.0)); // not a rotation
     assert!(evaluate(&[pair(0, bad, Some(gt))], 1.0).is_err());
     let m = evaluate(&[], 1.0).unwrap();
     assert_eq!(m.frames, 0);

@@ -2,9 +2,9 @@
 //! gives the same pose as on the original frame.
 #![allow(clippy::unwrap_used)]
 
+use hitl_hal::pose;
 use hitl_perception::icp::{IcpConfig, IcpTracker};
 use hitl_perception::normalize::{median_target_depth, normalize_frame, DepthNormalized};
-use hitl_perception::pose;
 use hitl_perception::testing::{intrinsics_hfov, look_pose, render};
 use hitl_perception::{PoseEstimator, TargetModel};
 
@@ -34,8 +34,7 @@ fn icp_on_normalised_input_gives_the_same_pose_after_unscaling() {
         let frame = render(&mesh, &gt, &k, i as u64);
         let a = plain.estimate(&frame).unwrap().pose.unwrap();
         let b = normed.estimate(&frame).unwrap().pose.unwrap();
-        let dt = (pose::translation(&a) - pose::translation(&b)).norm();
-        let dr = pose::rotation_angle(&(pose::rotation(&a).transpose() * pose::rotation(&b)));
+        let (dt, dr) = pose::difference(&a, &b);
         // Same solve up to rounding (depth is stored as f32, so ~1e-7 relative).
         assert!(dt < 1e-5 * range, "frame {i}: translation differs by {dt}");
         assert!(dr < 1e-5, "frame {i}: rotation differs by {dr} rad");

@@ -7,12 +7,7 @@ use hitl_perception::metrics::{evaluate, PosePair};
 use hitl_perception::replay::replay_frames;
 use hitl_perception::testing::{intrinsics_hfov, look_pose, render};
 use hitl_perception::{PoseEstimator, TargetModel};
-use hitl_record::{DepthImage, FrameRecord, Plane, Pose as RecPose, Recorder, RunMetadata};
-
-fn rec_pose(p: &hitl_perception::pose::Pose) -> RecPose {
-    let m: [[f64; 4]; 4] = std::array::from_fn(|r| std::array::from_fn(|c| p[(r, c)]));
-    RecPose::from_matrix(&m)
-}
+use hitl_record::{DepthImage, FrameRecord, Plane, Recorder, RunMetadata};
 
 #[test]
 fn recorded_frames_replay_through_the_tracker() {
@@ -40,7 +35,7 @@ fn recorded_frames_replay_through_the_tracker() {
                 data: f.depth_m.clone(),
             })),
             mask: f.mask.clone().map(plane),
-            gt_pose: Some(rec_pose(&gt)),
+            gt_pose: Some(gt),
             tf: None,
             trigger_ns: None,
         };

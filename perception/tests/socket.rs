@@ -2,14 +2,14 @@
 //! scripts/pose_peer.py (the venv's Python and numpy), well-behaved and with each of its faults.
 #![allow(clippy::unwrap_used)]
 
-use hitl_perception::pose::{self, Pose};
+use hitl_hal::Pose;
 use hitl_perception::socket::{SocketConfig, SocketEstimator};
 use hitl_perception::testing::{intrinsics_hfov, look_pose, render};
 use hitl_perception::{
     backend_from_spec, BackendSpec, Estimate, EstimateKind, Mesh, PerceptionError, PerceptionFrame,
     PoseEstimator, TargetModel,
 };
-use nalgebra::{Matrix3, Vector3};
+use nalgebra::{UnitQuaternion, Vector3};
 use std::path::{Path, PathBuf};
 use std::process::{Child, Command, Stdio};
 use std::time::{Duration, Instant};
@@ -81,8 +81,8 @@ fn mesh() -> Mesh {
 
 fn gt_pose() -> Pose {
     let mut p = look_pose(0.9, 0.3, -0.4, 1.1);
-    p[(0, 3)] = 0.02;
-    p[(1, 3)] = -0.01;
+    p.translation.x = 0.02;
+    p.translation.y = -0.01;
     p
 }
 
@@ -116,8 +116,8 @@ fn expected_centroid(f: &PerceptionFrame) -> Vector3<f64> {
 
 fn assert_centroid_pose(e: &Estimate, f: &PerceptionFrame) {
     let p = e.pose.expect("a pose");
-    assert_eq!(pose::rotation(&p), Matrix3::identity());
-    let t = pose::translation(&p);
+    assert_eq!(p.rotation, UnitQuaternion::identity());
+    let t = p.translation.vector;
     let want = expected_centroid(f);
     assert!((t - want).norm() < 1e-9, "translation {t:?}, expected centroid {want:?}");
 }
@@ -173,7 +173,7 @@ fn centroid_pose_matches_the_masked_back_projection() {
     assert_eq!(e.residual_m, 0.0);
     assert_centroid_pose(&e, &f);
     // The centroid is of the visible surface: near, but not at, the true position.
-    assert!((pose::translation(&e.pose.unwrap()) - pose::translation(&gt_pose())).norm() < 0.2);
+    assert!((e.pose.unwrap().translation.vector - gt_pose().translation.vector).norm() < 0.2);
 
     // The mask travels and is used: cover the left half and the centroid moves right.
     let mut half = frame(6);
@@ -185,7 +185,7 @@ fn centroid_pose_matches_the_masked_back_projection() {
     }
     let e2 = est.estimate(&half).unwrap();
     assert_centroid_pose(&e2, &half);
-    let dx = pose::translation(&e2.pose.unwrap()).x - pose::translation(&e.pose.unwrap()).x;
+    let dx = e2.pose.unwrap().translation.vector.x - e.pose.unwrap().translation.vector.x;
     assert!(dx > 1e-3, "masking the left half should move the centroid right, moved {dx}");
 
     // No colour and no mask: every valid depth pixel counts (the background has depth 0).
@@ -195,7 +195,7 @@ fn centroid_pose_matches_the_masked_back_projection() {
     let e3 = est.estimate(&bare).unwrap();
     assert_centroid_pose(&e3, &bare);
     assert!(
-        (pose::translation(&e3.pose.unwrap()) - pose::translation(&e.pose.unwrap())).norm() < 1e-9
+        (e3.pose.unwrap().translation.vector - e.pose.unwrap().translation.vector).norm() < 1e-9
     );
 }
 

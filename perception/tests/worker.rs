@@ -3,7 +3,7 @@
 #![allow(clippy::unwrap_used)]
 
 use hitl_hal::Intrinsics;
-use hitl_perception::pose::Pose;
+use hitl_hal::Pose;
 use hitl_perception::{
     spawn_worker, Estimate, EstimateKind, PerceptionError, PerceptionFrame, PoseEstimator,
     ReregisterPolicy,
@@ -35,8 +35,7 @@ impl PoseEstimator for Gated {
         if Some(f.seq) == self.lose_seq {
             return Ok(Estimate::lost());
         }
-        let mut p = Pose::identity();
-        p[(2, 3)] = f.seq as f64;
+        let p = Pose::translation(0.0, 0.0, f.seq as f64);
         Ok(Estimate { pose: Some(p), kind: EstimateKind::Tracked, residual_m: 0.0 })
     }
     fn reset(&mut self) {

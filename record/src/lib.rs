@@ -29,7 +29,7 @@ pub use live::{LiveConfig, LiveError, LiveServer, LiveSummary, LiveTap};
 pub use metadata::{RunMetadata, SunPhaseTrack};
 pub use msg::{
     ArmStateMsg, CaptureSyncMsg, DepthImage, EventDetail, EventKind, FrameRecord, LightMsg, Phase,
-    Plane, Pose, PoseStamped, SafetyEventMsg, SetpointMsg, TfMsg, TimingMsg, TriggerFiredMsg,
+    Plane, PoseStamped, SafetyEventMsg, SetpointMsg, TfMsg, TimingMsg, TriggerFiredMsg,
 };
 pub use queues::{QueueCapacity, Telemetry};
 pub use recorder::{RecordSummary, Recorder, RecorderConfig, RecorderHandle};

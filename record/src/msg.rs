@@ -4,10 +4,7 @@
 //! so the real-time tick can push them into bounded lock-free queues without allocating. Frames
 //! carry their pixel buffers and are built outside the tick by the camera intake.
 
-use hitl_hal::{ArmState, CaptureRequest, Intrinsics, RgbdFrame, DOF};
-use nalgebra::{
-    Isometry3, Matrix3, Point3, Quaternion, Rotation3, Translation3, UnitQuaternion, Vector3,
-};
+use hitl_hal::{ArmState, CaptureRequest, Intrinsics, Pose, RgbdFrame, DOF};
 use serde::{Deserialize, Serialize};
 
 /// Which part of a run a setpoint belongs to.
@@ -232,80 +229,6 @@ impl SafetyEventMsg {
     }
 }
 
-/// A rigid transform: translation in metres and a unit quaternion (x, y, z, w).
-///
-/// As a transform `parent_T_child` it maps points of the child frame into the parent frame.
-#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
-pub struct Pose {
-    pub translation: [f64; 3],
-    /// Unit quaternion, x, y, z, w.
-    pub rotation: [f64; 4],
-}
-
-impl Pose {
-    pub const IDENTITY: Pose = Pose { translation: [0.0; 3], rotation: [0.0, 0.0, 0.0, 1.0] };
-
-    /// As an nalgebra isometry (the quaternion re-normalised).
-    pub fn isometry(&self) -> Isometry3<f64> {
-        let [x, y, z, w] = self.rotation;
-        Isometry3::from_parts(
-            Translation3::from(Vector3::from(self.translation)),
-            UnitQuaternion::from_quaternion(Quaternion::new(w, x, y, z)),
-        )
-    }
-
-    /// From an nalgebra isometry.
-    pub fn from_isometry(iso: &Isometry3<f64>) -> Pose {
-        let q = iso.rotation.coords; // x, y, z, w
-        Pose { translation: iso.translation.vector.into(), rotation: [q.x, q.y, q.z, q.w] }
-    }
-
-    /// From a homogeneous 4x4 matrix (row-major, rotation part orthonormal).
-    pub fn from_matrix(m: &[[f64; 4]; 4]) -> Self {
-        let r = Matrix3::from_fn(|i, j| m[i][j]);
-        let q = UnitQuaternion::from_rotation_matrix(&Rotation3::from_matrix_unchecked(r));
-        let t = Translation3::new(m[0][3], m[1][3], m[2][3]);
-        Pose::from_isometry(&Isometry3::from_parts(t, q))
-    }
-
-    /// The rotation as a row-major 3x3 matrix.
-    pub fn rotation_matrix(&self) -> [[f64; 3]; 3] {
-        let r = self.isometry().rotation.to_rotation_matrix();
-        std::array::from_fn(|i| std::array::from_fn(|j| r[(i, j)]))
-    }
-
-    /// The homogeneous 4x4 matrix (row-major).
-    pub fn to_matrix(&self) -> [[f64; 4]; 4] {
-        let m = self.isometry().to_homogeneous();
-        std::array::from_fn(|i| std::array::from_fn(|j| m[(i, j)]))
-    }
-
-    /// `self * other` (apply `other` first).
-    pub fn compose(&self, other: &Pose) -> Pose {
-        Pose::from_isometry(&(self.isometry() * other.isometry()))
-    }
-
-    /// The inverse transform.
-    pub fn inverse(&self) -> Pose {
-        Pose::from_isometry(&self.isometry().inverse())
-    }
-
-    /// Map a point of the child frame into the parent frame.
-    pub fn transform_point(&self, p: [f64; 3]) -> [f64; 3] {
-        self.isometry().transform_point(&Point3::from(p)).coords.into()
-    }
-
-    /// Angle of the rotation between two poses, radians.
-    pub fn angle_to(&self, other: &Pose) -> f64 {
-        self.isometry().rotation.angle_to(&other.isometry().rotation)
-    }
-
-    /// Distance between the translations, metres.
-    pub fn distance_to(&self, other: &Pose) -> f64 {
-        (Vector3::from(self.translation) - Vector3::from(other.translation)).norm()
-    }
-}
-
 /// `/tf`: the transforms between base, flange, camera and target at one instant.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct TfMsg {
@@ -321,7 +244,7 @@ pub struct TfMsg {
 impl TfMsg {
     /// `target_T_camera`: the camera's pose in the target frame.
     pub fn camera_in_target(&self) -> Pose {
-        self.base_target.inverse().compose(&self.base_flange).compose(&self.flange_camera)
+        self.base_target.inverse() * self.base_flange * self.flange_camera
     }
 }
 
@@ -422,42 +345,20 @@ pub fn metres_to_mm(m: f32) -> u16 {
 #[cfg(test)]
 mod tests {
     use super::*;
-
-    fn close(a: &Pose, b: &Pose) -> bool {
-        a.distance_to(b) < 1e-9 && a.angle_to(b) < 1e-7
-    }
-
-    fn sample() -> Pose {
-        let (s, c) = (0.3f64.sin(), 0.3f64.cos());
-        let n = (0.2f64 * 0.2 + 0.5 * 0.5 + 0.7 * 0.7).sqrt();
-        Pose { translation: [0.1, -0.2, 0.3], rotation: [s * 0.2 / n, s * 0.5 / n, s * 0.7 / n, c] }
-    }
-
-    #[test]
-    fn matrix_round_trip_and_inverse() {
-        let p = sample();
-        assert!(close(&Pose::from_matrix(&p.to_matrix()), &p));
-        assert!(close(&p.compose(&p.inverse()), &Pose::IDENTITY));
-        let x = [0.4, 0.5, -0.6];
-        let back = p.inverse().transform_point(p.transform_point(x));
-        assert!((0..3).all(|i| (back[i] - x[i]).abs() < 1e-12));
-    }
+    use nalgebra::Vector3;
 
     #[test]
     fn camera_in_target_frame() {
         // Flange 1 m in front of the target along base x, camera 0.1 m further along flange z
         // which points along base x (flange rotated +90 deg about base y).
-        let h = std::f64::consts::FRAC_PI_4;
+        let h = std::f64::consts::FRAC_PI_2;
         let tf = TfMsg {
             t_ns: 0,
-            base_flange: Pose {
-                translation: [1.0, 0.0, 0.5],
-                rotation: [0.0, h.sin(), 0.0, h.cos()],
-            },
-            flange_camera: Pose { translation: [0.0, 0.0, 0.1], rotation: [0.0, 0.0, 0.0, 1.0] },
-            base_target: Pose { translation: [2.0, 0.0, 0.5], rotation: [0.0, 0.0, 0.0, 1.0] },
+            base_flange: Pose::new(Vector3::new(1.0, 0.0, 0.5), Vector3::new(0.0, h, 0.0)),
+            flange_camera: Pose::translation(0.0, 0.0, 0.1),
+            base_target: Pose::translation(2.0, 0.0, 0.5),
         };
-        let c = tf.camera_in_target().translation;
+        let c = tf.camera_in_target().translation.vector;
         assert!((c[0] + 0.9).abs() < 1e-12 && c[1].abs() < 1e-12 && c[2].abs() < 1e-12, "{c:?}");
     }
 

@@ -4,11 +4,12 @@
 
 use crate::error::ReadError;
 use crate::msg::{
-    ArmStateMsg, CaptureSyncMsg, LightMsg, Pose, PoseStamped, SetpointMsg, TfMsg, TimingMsg,
+    ArmStateMsg, CaptureSyncMsg, LightMsg, PoseStamped, SetpointMsg, TfMsg, TimingMsg,
     TriggerFiredMsg,
 };
 use crate::topics;
 use foxglove::messages as fg;
+use hitl_hal::{pose, Pose};
 use mcap::records::Record;
 use mcap::sans_io::linear_reader::{LinearReadEvent, LinearReader, LinearReaderOptions};
 use serde::{Deserialize, Serialize};
@@ -165,57 +166,62 @@ fn bad(path: &Path, topic: &str, reason: impl ToString) -> ReadError {
     }
 }
 
-fn pose_of(p: Option<fg::Pose>) -> Pose {
-    let p = p.unwrap_or_default();
-    let t = p.position.unwrap_or_default();
-    let q = p.orientation.unwrap_or(fg::Quaternion { x: 0.0, y: 0.0, z: 0.0, w: 1.0 });
-    Pose { translation: [t.x, t.y, t.z], rotation: [q.x, q.y, q.z, q.w] }
+/// A recorded position and orientation as a [`Pose`]: a missing position is the origin, a missing
+/// orientation no rotation, a quaternion off unit length re-normalised; one that is not finite
+/// or of norm (near) zero is refused, as is a non-finite position.
+fn pose_of(
+    position: Option<fg::Vector3>,
+    orientation: Option<fg::Quaternion>,
+) -> Result<Pose, String> {
+    let t = position.unwrap_or_default();
+    let q = orientation.unwrap_or(fg::Quaternion { x: 0.0, y: 0.0, z: 0.0, w: 1.0 });
+    pose::from_quat_xyzw_t([q.x, q.y, q.z, q.w], [t.x, t.y, t.z]).ok_or_else(|| {
+        format!(
+            "pose is not a rigid transform: position ({}, {}, {}), quaternion (x, y, z, w) \
+             ({}, {}, {}, {})",
+            t.x, t.y, t.z, q.x, q.y, q.z, q.w
+        )
+    })
 }
 
 fn ts_ns(t: Option<fg::Timestamp>) -> Option<u64> {
     t.map(|t| t.total_nanos())
 }
 
-/// Decode a `/tf` message into the project's transform set (`None` if a frame is missing).
-pub fn decode_tf(data: &[u8], log_time: u64) -> Result<Option<TfMsg>, prost::DecodeError> {
-    let m = <fg::FrameTransforms as prost::Message>::decode(data)?;
+/// Decode a `/tf` message into the project's transform set (`None` if a frame is missing); a
+/// transform that is not rigid (see `pose_of`) is an error.
+pub fn decode_tf(data: &[u8], log_time: u64) -> Result<Option<TfMsg>, String> {
+    let m = <fg::FrameTransforms as prost::Message>::decode(data).map_err(|e| e.to_string())?;
     let mut tf = TfMsg {
         t_ns: log_time,
-        base_flange: Pose::IDENTITY,
-        flange_camera: Pose::IDENTITY,
-        base_target: Pose::IDENTITY,
+        base_flange: Pose::identity(),
+        flange_camera: Pose::identity(),
+        base_target: Pose::identity(),
     };
     let mut seen = 0u8;
     for t in m.transforms {
-        let tr = t.translation.unwrap_or_default();
-        let q = t.rotation.unwrap_or_default();
-        let p = Pose { translation: [tr.x, tr.y, tr.z], rotation: [q.x, q.y, q.z, q.w] };
-        match (t.parent_frame_id.as_str(), t.child_frame_id.as_str()) {
-            (topics::FRAME_BASE, topics::FRAME_FLANGE) => {
-                tf.base_flange = p;
-                seen |= 1;
-            }
-            (topics::FRAME_FLANGE, topics::FRAME_CAMERA) => {
-                tf.flange_camera = p;
-                seen |= 2;
-            }
-            (topics::FRAME_BASE, topics::FRAME_TARGET) => {
-                tf.base_target = p;
-                seen |= 4;
-            }
-            _ => {}
-        }
         if let Some(ns) = ts_ns(t.timestamp) {
             tf.t_ns = ns;
         }
+        let (slot, bit) = match (t.parent_frame_id.as_str(), t.child_frame_id.as_str()) {
+            (topics::FRAME_BASE, topics::FRAME_FLANGE) => (&mut tf.base_flange, 1),
+            (topics::FRAME_FLANGE, topics::FRAME_CAMERA) => (&mut tf.flange_camera, 2),
+            (topics::FRAME_BASE, topics::FRAME_TARGET) => (&mut tf.base_target, 4),
+            _ => continue,
+        };
+        *slot = pose_of(t.translation, t.rotation)
+            .map_err(|e| format!("{} -> {}: {e}", t.parent_frame_id, t.child_frame_id))?;
+        seen |= bit;
     }
     Ok((seen == 7).then_some(tf))
 }
 
-/// Decode a `/pose/gt` or `/pose/estimate` message.
-pub fn decode_pose(data: &[u8], log_time: u64) -> Result<PoseStamped, prost::DecodeError> {
-    let m = <fg::PoseInFrame as prost::Message>::decode(data)?;
-    Ok(PoseStamped { capture_ns: ts_ns(m.timestamp).unwrap_or(log_time), pose: pose_of(m.pose) })
+/// Decode a `/pose/gt` or `/pose/estimate` message (a pose that is not rigid is an error).
+pub fn decode_pose(data: &[u8], log_time: u64) -> Result<PoseStamped, String> {
+    let m = <fg::PoseInFrame as prost::Message>::decode(data).map_err(|e| e.to_string())?;
+    let p = m.pose.unwrap_or_default();
+    let pose = pose_of(p.position, p.orientation)?;
+    Ok(PoseStamped { capture_ns: ts_ns(m.timestamp).unwrap_or(log_time), pose })
 }
 
 /// Decode a `/camera/*` image.
@@ -302,14 +308,12 @@ fn decode_into(rec: &mut Recording, m: &RawMessage<'_>) -> Result<(), String> {
             rec.recorder_stats.push(serde_json::from_slice(m.data).map_err(|x| e(&x))?)
         }
         topics::TF => {
-            if let Some(tf) = decode_tf(m.data, m.log_time).map_err(|x| e(&x))? {
+            if let Some(tf) = decode_tf(m.data, m.log_time)? {
                 rec.tf.push(tf);
             }
         }
-        topics::POSE_GT => rec.pose_gt.push(decode_pose(m.data, m.log_time).map_err(|x| e(&x))?),
-        topics::POSE_ESTIMATE => {
-            rec.pose_estimate.push(decode_pose(m.data, m.log_time).map_err(|x| e(&x))?)
-        }
+        topics::POSE_GT => rec.pose_gt.push(decode_pose(m.data, m.log_time)?),
+        topics::POSE_ESTIMATE => rec.pose_estimate.push(decode_pose(m.data, m.log_time)?),
         topics::DEPTH => {
             let img = decode_image(m.data).map_err(|x| e(&x))?;
             rec.depth_images.push(ImageInfo {
@@ -322,4 +326,72 @@ fn decode_into(rec: &mut Recording, m: &RawMessage<'_>) -> Result<(), String> {
         _ => {}
     }
     Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use prost::Message;
+
+    fn pose_msg(orientation: Option<fg::Quaternion>) -> Vec<u8> {
+        fg::PoseInFrame {
+            timestamp: None,
+            frame_id: topics::FRAME_CAMERA.into(),
+            pose: Some(fg::Pose {
+                position: Some(fg::Vector3 { x: 0.1, y: 0.2, z: 1.0 }),
+                orientation,
+            }),
+        }
+        .encode_to_vec()
+    }
+
+    fn q(x: f64, y: f64, z: f64, w: f64) -> Option<fg::Quaternion> {
+        Some(fg::Quaternion { x, y, z, w })
+    }
+
+    #[test]
+    fn recorded_quaternions_are_renormalised_or_refused() {
+        // Twice unit length, 90 degrees about z: re-normalised.
+        let h = std::f64::consts::FRAC_PI_4;
+        let p = decode_pose(&pose_msg(q(0.0, 0.0, 2.0 * h.sin(), 2.0 * h.cos())), 5).expect("ok");
+        assert_eq!(p.capture_ns, 5);
+        assert!((p.pose.rotation.angle() - 2.0 * h).abs() < 1e-12);
+        assert!((p.pose.rotation.coords.norm() - 1.0).abs() < 1e-15);
+        assert_eq!(p.pose.translation.vector, nalgebra::Vector3::new(0.1, 0.2, 1.0));
+        // No orientation: no rotation.
+        assert_eq!(decode_pose(&pose_msg(None), 5).expect("ok").pose.rotation.angle(), 0.0);
+        // Zero length or not finite: refused, with the numbers.
+        for bad in [q(0.0, 0.0, 0.0, 0.0), q(f64::NAN, 0.0, 0.0, 1.0)] {
+            let e = decode_pose(&pose_msg(bad), 5).expect_err("refused");
+            assert!(e.contains("not a rigid transform"), "{e}");
+        }
+    }
+
+    #[test]
+    fn a_bad_transform_is_refused_only_where_it_is_used() {
+        let tf = |parent: &str, child: &str, rotation| fg::FrameTransform {
+            timestamp: None,
+            parent_frame_id: parent.into(),
+            child_frame_id: child.into(),
+            translation: Some(fg::Vector3 { x: 0.0, y: 0.0, z: 0.5 }),
+            rotation,
+        };
+        let ok = q(0.0, 0.0, 0.0, 1.0);
+        let msg = |flange_rotation, other_rotation| {
+            fg::FrameTransforms {
+                transforms: vec![
+                    tf(topics::FRAME_BASE, topics::FRAME_FLANGE, flange_rotation),
+                    tf(topics::FRAME_FLANGE, topics::FRAME_CAMERA, ok),
+                    tf(topics::FRAME_BASE, topics::FRAME_TARGET, ok),
+                    tf("base", "somewhere_else", other_rotation),
+                ],
+            }
+            .encode_to_vec()
+        };
+        let zero = q(0.0, 0.0, 0.0, 0.0);
+        let t = decode_tf(&msg(ok, zero), 9).expect("the unknown frame is not read").expect("all");
+        assert_eq!(t.base_flange.translation.z, 0.5);
+        let e = decode_tf(&msg(zero, ok), 9).expect_err("base -> flange is refused");
+        assert!(e.contains("base -> flange"), "{e}");
+    }
 }

@@ -9,12 +9,12 @@ use crate::error::RecordError;
 use crate::metadata::RunMetadata;
 use crate::msg::{
     metres_to_mm, ArmStateMsg, CaptureSyncMsg, DepthImage, EventDetail, FrameRecord, LightMsg,
-    Pose, PoseStamped, SafetyEventMsg, SetpointMsg, TfMsg, TimingMsg, TriggerFiredMsg,
+    PoseStamped, SafetyEventMsg, SetpointMsg, TfMsg, TimingMsg, TriggerFiredMsg,
 };
 use crate::topics;
 use foxglove::messages as fg;
 use foxglove::Encode;
-use hitl_hal::Intrinsics;
+use hitl_hal::{pose, Intrinsics, Pose};
 use mcap::records::{MessageHeader, Metadata};
 use serde::Serialize;
 use std::collections::BTreeMap;
@@ -130,9 +130,11 @@ pub(crate) fn ts(ns: u64) -> Option<fg::Timestamp> {
     Some(fg::Timestamp::new(sec, (ns % 1_000_000_000) as u32))
 }
 
+/// The Foxglove pose of a [`Pose`]: position in metres, orientation as the unit quaternion
+/// (x, y, z, w), as every recording has carried it.
 fn fg_pose(p: &Pose) -> fg::Pose {
-    let [x, y, z] = p.translation;
-    let [qx, qy, qz, qw] = p.rotation;
+    let [x, y, z] = p.translation.vector.into();
+    let [qx, qy, qz, qw] = pose::quat_xyzw(p);
     fg::Pose {
         position: Some(fg::Vector3 { x, y, z }),
         orientation: Some(fg::Quaternion { x: qx, y: qy, z: qz, w: qw }),

@@ -6,7 +6,7 @@
 mod common;
 
 use common::meta;
-use hitl_hal::Intrinsics;
+use hitl_hal::{Intrinsics, Pose};
 use hitl_record::report::contact::{rasterize, Silhouette, ESTIMATE_COLOUR, GROUND_TRUTH_COLOUR};
 use hitl_record::report::{
     write_report, write_report_with, ContactOptions, ReportOptions, TargetMesh,
@@ -34,12 +34,12 @@ fn intrinsics(w: u32, h: u32) -> Intrinsics {
 }
 
 fn gt_pose() -> Pose {
-    Pose { translation: [0.0, 0.0, 1.0], rotation: [0.0, 0.0, 0.0, 1.0] }
+    Pose::translation(0.0, 0.0, 1.0)
 }
 
 /// The estimate `px` pixels to the right of the ground truth (the square is at 1 m, f = 80).
 fn shifted(px: f64) -> Pose {
-    Pose { translation: [px / 80.0, 0.0, 1.0], rotation: [0.0, 0.0, 0.0, 1.0] }
+    Pose::translation(px / 80.0, 0.0, 1.0)
 }
 
 fn frame(k: u64, t: u64, w: u32, h: u32, with_mask: bool) -> FrameRecord {
@@ -224,7 +224,7 @@ fn a_large_frame_is_shrunk_and_its_outlines_follow() {
     let path = dir.path().join("run.mcap");
     // 1280x800 with an estimate 15 source pixels off: 5.625 sheet pixels at 480 wide.
     let (w, h) = (1280, 800);
-    let est = Pose { translation: [15.0 / (80.0 * 1280.0 / 96.0), 0.0, 1.0], ..gt_pose() };
+    let est = Pose::translation(15.0 / (80.0 * 1280.0 / 96.0), 0.0, 1.0);
     record(&path, vec![(frame(0, 3_000_000_000, w, h, true), Some(est))]);
     let out = dir.path().join("report");
     let model = |_: &BTreeMap<String, String>| Ok(square());

@@ -3,6 +3,7 @@
 mod common;
 
 use common::*;
+use hitl_hal::Pose;
 use hitl_record::reader::read_recording;
 use hitl_record::*;
 
@@ -42,8 +43,8 @@ fn write_run(path: &std::path::Path, cfg: RecorderConfig) -> RecordSummary {
         if k.is_multiple_of(30) && k / 30 < FRAMES {
             let fk = k / 30;
             assert!(tel.push_frame(frame(fk, t, true)));
-            let mut est = frame(fk, t, true).gt_pose.unwrap_or(Pose::IDENTITY);
-            est.translation[2] += 0.004;
+            let mut est = frame(fk, t, true).gt_pose.unwrap_or_else(Pose::identity);
+            est.translation.vector[2] += 0.004;
             tel.push_pose_estimate(&PoseStamped { capture_ns: t, pose: est });
         }
         if k == 100 {

@@ -3,6 +3,7 @@
 mod common;
 
 use common::*;
+use hitl_hal::Pose;
 use hitl_record::report::write_report;
 use hitl_record::*;
 
@@ -50,8 +51,8 @@ fn report_of_a_synthetic_run() {
                 std::thread::sleep(std::time::Duration::from_millis(1));
             }
             assert!(tel.push_frame(frame(fk, t, true)), "frame {fk} not queued");
-            let mut est = frame(fk, t, true).gt_pose.unwrap_or(Pose::IDENTITY);
-            est.translation[0] += 0.003; // 3 mm off
+            let mut est = frame(fk, t, true).gt_pose.unwrap_or_else(Pose::identity);
+            est.translation.vector[0] += 0.003; // 3 mm off
             tel.push_pose_estimate(&PoseStamped { capture_ns: t, pose: est });
             tel.push_light(&LightMsg { t_ns: t, level: 0.8 });
         }

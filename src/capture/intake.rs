@@ -5,7 +5,7 @@
 
 use super::history::StateHistory;
 use super::sink::IntakeQueues;
-use super::truth::{pose, LabFrames};
+use super::truth::LabFrames;
 use crate::control::telemetry::CaptureOut;
 use hitl_hal::RgbdFrame;
 use hitl_perception::{PerceptionFrame, WorkerHandle};
@@ -188,7 +188,7 @@ impl Worker {
         }
         if let Some(record) = &self.out.record {
             let mut rec = FrameRecord::from_rgbd(frame);
-            rec.gt_pose = Some(pose(&gt));
+            rec.gt_pose = Some(gt);
             rec.tf = Some(self.frames.tf(rec.capture_ns, &q));
             let deadline = std::time::Instant::now() + Duration::from_secs(2);
             while !record.frame_queue_has_room() && std::time::Instant::now() < deadline {

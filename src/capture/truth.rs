@@ -1,17 +1,16 @@
 //! Ground truth for a frame: where the target is in the camera frame (OpenCV axes), from forward
 //! kinematics of the arm at exposure, the camera mount and the lab's target pose.
 
-use hitl_hal::Joints;
-use hitl_record::{Pose, TfMsg};
+use hitl_hal::{Joints, Pose};
+use hitl_record::TfMsg;
 use hitl_trajectories::kinematics;
 use hitl_trajectories::lab::LabConfig;
-use nalgebra::Isometry3;
 
 /// The fixed transforms of the lab that ground truth needs.
 #[derive(Debug, Clone, Copy)]
 pub struct LabFrames {
-    pub flange_camera: Isometry3<f64>,
-    pub base_target: Isometry3<f64>,
+    pub flange_camera: Pose,
+    pub base_target: Pose,
 }
 
 impl LabFrames {
@@ -20,7 +19,7 @@ impl LabFrames {
     }
 
     /// `camera_T_target` with the arm at `q`.
-    pub fn target_in_camera(&self, q: &Joints) -> Isometry3<f64> {
+    pub fn target_in_camera(&self, q: &Joints) -> Pose {
         let camera = kinematics::flange_pose(q) * self.flange_camera;
         camera.inverse() * self.base_target
     }
@@ -29,18 +28,11 @@ impl LabFrames {
     pub fn tf(&self, t_ns: u64, q: &Joints) -> TfMsg {
         TfMsg {
             t_ns,
-            base_flange: pose(&kinematics::flange_pose(q)),
-            flange_camera: pose(&self.flange_camera),
-            base_target: pose(&self.base_target),
+            base_flange: kinematics::flange_pose(q),
+            flange_camera: self.flange_camera,
+            base_target: self.base_target,
         }
     }
-}
-
-/// A recorder pose from an isometry.
-pub fn pose(iso: &Isometry3<f64>) -> Pose {
-    let q = iso.rotation.quaternion();
-    let t = iso.translation.vector;
-    Pose { translation: [t.x, t.y, t.z], rotation: [q.i, q.j, q.k, q.w] }
 }
 
 #[cfg(test)]
@@ -61,7 +53,7 @@ mod tests {
         let tf = frames.tf(7, &q);
         let back = tf.camera_in_target().inverse();
         for i in 0..3 {
-            assert!((back.translation[i] - t.translation.vector[i]).abs() < 1e-9);
+            assert!((back.translation.vector[i] - t.translation.vector[i]).abs() < 1e-9);
         }
     }
 }

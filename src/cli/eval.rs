@@ -7,9 +7,9 @@
 
 use crate::cli::reregister::ReregisterArgs;
 use crate::exit;
+use hitl_hal::Pose;
 use hitl_perception::estimator::BackendSpec;
 use hitl_perception::metrics::{evaluate, frame_error, PosePair};
-use hitl_perception::pose::Pose;
 use hitl_perception::replay::replay_frames;
 use hitl_perception::reregister::METADATA_KEY;
 use hitl_perception::{backend_from_spec, ReregisterPolicy, Reregistering, TargetModel};
@@ -48,10 +48,6 @@ pub struct EvalArgs {
     /// with --json they go in a `per_frame` array.
     #[arg(long)]
     pub per_frame: bool,
-}
-
-fn to_pose(m: [[f64; 4]; 4]) -> Pose {
-    Pose::from_fn(|r, c| m[r][c])
 }
 
 pub fn run(args: EvalArgs) -> u8 {
@@ -139,9 +135,7 @@ fn eval(args: &EvalArgs) -> Result<serde_json::Value, String> {
     }
     let mut extra = serde_json::Map::new();
     let estimates: HashMap<u64, Pose> = match &args.backend {
-        None => {
-            rec.pose_estimate.iter().map(|p| (p.capture_ns, to_pose(p.pose.to_matrix()))).collect()
-        }
+        None => rec.pose_estimate.iter().map(|p| (p.capture_ns, p.pose)).collect(),
         Some(b) => {
             let spec: BackendSpec = b.parse().map_err(|e| format!("{e}"))?;
             let target = args
@@ -202,7 +196,7 @@ fn eval(args: &EvalArgs) -> Result<serde_json::Value, String> {
         .iter()
         .map(|g| PosePair {
             timestamp_ns: g.capture_ns,
-            gt: to_pose(g.pose.to_matrix()),
+            gt: g.pose,
             est: estimates.get(&g.capture_ns).copied(),
         })
         .collect();

@@ -7,8 +7,9 @@
 
 use super::ExportError;
 use foxglove::messages as fg;
+use hitl_hal::Pose;
 use hitl_record::reader::{self, Recording};
-use hitl_record::{topics, Pose};
+use hitl_record::topics;
 use std::collections::{BTreeMap, BTreeSet};
 use std::ops::ControlFlow;
 use std::path::{Path, PathBuf};
@@ -258,8 +259,7 @@ fn frame_at(rec: &Recording, intrinsics: &BTreeMap<u64, [f64; 4]>, t: u64) -> Fr
             i.checked_sub(1).map(|j| &rec.setpoints[j])
         })
         .map_or(nan7, |s| s.q);
-    let camera_pose =
-        exact(&rec.tf, t, |m| m.t_ns).map(|tf| tf.base_flange.compose(&tf.flange_camera));
+    let camera_pose = exact(&rec.tf, t, |m| m.t_ns).map(|tf| tf.base_flange * tf.flange_camera);
     Frame {
         capture_ns: t,
         tick,

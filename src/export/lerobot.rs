@@ -14,7 +14,7 @@ use super::episode::{read_episode, Episode, Frame, Stream};
 use super::tables::{tasks_table, Column, Table};
 use super::video::{self, DepthQuant};
 use super::{io_err, ExportError};
-use hitl_record::Pose;
+use hitl_hal::pose::{self, Pose};
 use serde_json::{json, Map, Value};
 use std::collections::BTreeSet;
 use std::path::{Path, PathBuf};
@@ -257,8 +257,8 @@ fn unique_tasks(tasks: &[String]) -> Vec<String> {
 
 fn pose7(p: Option<Pose>) -> [f32; 7] {
     p.map_or([f32::NAN; 7], |p| {
-        let [x, y, z] = p.translation;
-        let [qx, qy, qz, qw] = p.rotation;
+        let [x, y, z]: [f64; 3] = p.translation.vector.into();
+        let [qx, qy, qz, qw] = pose::quat_xyzw(&p);
         [x, y, z, qx, qy, qz, qw].map(|v| v as f32)
     })
 }

@@ -3,8 +3,8 @@
 
 use super::cloud::centroid;
 use super::model::ModelCloud;
-use crate::pose::{self, Pose};
-use nalgebra::{Matrix6, Vector3, Vector6};
+use hitl_hal::Pose;
+use nalgebra::{Matrix6, Translation3, UnitQuaternion, Vector3, Vector6};
 
 /// How an alignment ended.
 #[derive(Debug, Clone, Copy)]
@@ -33,8 +33,8 @@ pub fn align(
     let mut pairs: Vec<(Vector3<f64>, usize, f64)> = Vec::with_capacity(scene.len());
     let mut dists: Vec<f64> = Vec::with_capacity(scene.len());
     for _ in 0..iters {
-        let r = pose::rotation(&t);
-        let tr = pose::translation(&t);
+        let r = t.rotation.to_rotation_matrix();
+        let tr = t.translation.vector;
         let rt = r.transpose();
         let view_body = |s: &Vector3<f64>| -(rt * s).normalize();
         pairs.clear();
@@ -89,13 +89,11 @@ pub fn align(
         };
         let w = Vector3::new(x[0], x[1], x[2]);
         let v = Vector3::new(x[3], x[4], x[5]);
-        let step = pose::small_motion(&w, &v);
-        let to_c = pose::from_rt(&nalgebra::Matrix3::identity(), &c);
-        let from_c = pose::from_rt(&nalgebra::Matrix3::identity(), &(-c));
-        t = to_c * step * from_c * t;
-        // Re-orthonormalise against accumulated rounding.
-        let rot = nalgebra::Rotation3::from_matrix(&pose::rotation(&t));
-        t = pose::from_rt(rot.matrix(), &pose::translation(&t));
+        // The step about the scene centroid: rotation vector `w`, then translation `v`.
+        let step = Pose::new(v, w);
+        t = Translation3::from(c) * step * Translation3::from(-c) * t;
+        // Re-normalise against accumulated rounding.
+        t.rotation = UnitQuaternion::new_normalize(t.rotation.into_inner());
         if w.norm() < 1e-9 && v.norm() < 1e-9 * model.diameter {
             break;
         }
@@ -115,8 +113,8 @@ pub fn quality(
     if scene.is_empty() {
         return (0.0, f64::NAN);
     }
-    let r = pose::rotation(t);
-    let tr = pose::translation(t);
+    let r = t.rotation.to_rotation_matrix();
+    let tr = t.translation.vector;
     let rt = r.transpose();
     let mut inliers = 0usize;
     let mut sq = 0.0;

@@ -33,11 +33,12 @@ pub mod score;
 
 use crate::estimator::{Estimate, EstimateKind, PoseEstimator, ScalableEstimator};
 use crate::models::Mesh;
-use crate::pose::{self, Pose};
+use crate::pose::from_rt;
 use crate::{PerceptionError, PerceptionFrame};
 use align::{align, Fit};
+use hitl_hal::pose::{self, Pose};
 use model::ModelCloud;
-use nalgebra::{Matrix3, Vector3};
+use nalgebra::{Matrix3, Translation3, Vector3};
 use score::Hidden;
 
 /// Tuning of the tracker. Distances are fractions of the model's bounding-box diagonal `D`.
@@ -116,7 +117,7 @@ const TIE_MARGIN: f64 = 0.02;
 
 /// Angle between two poses' rotations, radians.
 fn rotation_distance(a: &Pose, b: &Pose) -> f64 {
-    pose::rotation_angle(&(pose::rotation(a).transpose() * pose::rotation(b)))
+    a.rotation.angle_to(&b.rotation)
 }
 
 /// The built-in tracker.
@@ -244,7 +245,7 @@ impl IcpTracker {
             .grid
             .iter()
             .zip(&self.fronts)
-            .map(|(r, front)| rank(&sparse, &pose::from_rt(r, &(c - front)), 4, 0.3 * d))
+            .map(|(r, front)| rank(&sparse, &from_rt(r, &(c - front)), 4, 0.3 * d))
             .collect();
         cands.sort_by(|a, b| b.0.total_cmp(&a.0));
         cands.truncate(self.cfg.coarse_keep);
@@ -295,8 +296,9 @@ impl IcpTracker {
 
     /// `pose` moved so the model's camera-facing surface is centred on the scene point `at`.
     fn placed(&self, pose: &Pose, at: &Vector3<f64>) -> Pose {
-        let r = pose::rotation(pose);
-        pose::from_rt(&r, &(at - global::front_centroid(&self.model, &r)))
+        let r = pose.rotation.to_rotation_matrix();
+        let front = global::front_centroid(&self.model, r.matrix());
+        Pose::from_parts(Translation3::from(at - front), pose.rotation)
     }
 
     /// Where the last good pose has moved by now if the target kept its motion, placed on `at`;
@@ -314,8 +316,8 @@ impl IcpTracker {
     fn accept(&mut self, s: &Scored, kind: EstimateKind) -> Estimate {
         let new = s.fit.pose;
         if let (Some(last), 0) = (self.last_good, self.missed) {
-            let motion = new * pose::inverse(&last);
-            let turn = pose::rotation_angle(&pose::rotation(&motion));
+            let motion = new * last.inverse();
+            let turn = motion.rotation.angle();
             self.velocity = (turn <= MAX_TURN_PER_FRAME_RAD).then_some(motion);
         }
         self.missed = 0;
@@ -415,9 +417,7 @@ impl ScalableEstimator for IcpTracker {
         }
         let poses = [&mut self.prev, &mut self.last_good, &mut self.velocity];
         for p in poses.into_iter().flatten() {
-            for r in 0..3 {
-                p[(r, 3)] *= factor;
-            }
+            p.translation.vector *= factor;
         }
     }
 }

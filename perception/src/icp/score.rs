@@ -4,8 +4,8 @@
 //! another object ([`Hidden`]).
 
 use super::model::ModelCloud;
-use crate::pose::{self, Pose};
 use crate::PerceptionFrame;
+use hitl_hal::Pose;
 
 /// Samples whose surface normal is within this cosine of perpendicular to the line of sight are
 /// not judged: seen edge-on, a thin part (a solar wing) covers less than a pixel and the sensor
@@ -56,8 +56,8 @@ pub fn check_strided(
 ) -> ImageCheck {
     let k = &frame.intrinsics;
     let (w, h) = (k.width as i64, k.height as i64);
-    let r = pose::rotation(t);
-    let tr = pose::translation(t);
+    let r = t.rotation.to_rotation_matrix();
+    let tr = t.translation.vector;
     let (mut in_image, mut hits, mut violations) = (0usize, 0usize, 0usize);
     let samples = model.points.iter().zip(&model.normals).step_by(stride.max(1));
     for (p, n) in samples {

@@ -22,8 +22,9 @@ pub use runtime::{dylib_path, environment};
 use crate::estimator::{Estimate, EstimateKind, PoseEstimator};
 use crate::icp::{IcpConfig, IcpTracker};
 use crate::models::Mesh;
-use crate::{pnp, pose, PerceptionError, PerceptionFrame};
-use nalgebra::Vector3;
+use crate::{pnp, PerceptionError, PerceptionFrame};
+use hitl_hal::pose::{self, Pose};
+use nalgebra::{Matrix4, Vector3};
 use ort::session::{Session, SessionInputValue};
 use ort::value::Tensor;
 use std::borrow::Cow;
@@ -208,12 +209,10 @@ impl PoseEstimator for OnnxEstimator {
         let inputs = self.inputs(frame)?;
         let err = rt_err(&self.path);
         let outputs = self.session.run(inputs).map_err(|e| err(e.to_string()))?;
-        let direct = |p: pose::Pose| {
-            if pose::is_rigid(&p) {
-                Estimate { pose: Some(p), kind: EstimateKind::Direct, residual_m: 0.0 }
-            } else {
-                Estimate::lost()
-            }
+        // A matrix that is not rigid (or not finite), or a quaternion of no length, is `Lost`.
+        let direct = |p: Option<Pose>| match p {
+            Some(p) => Estimate { pose: Some(p), kind: EstimateKind::Direct, residual_m: 0.0 },
+            None => Estimate::lost(),
         };
         match self.contract.output {
             OutputKind::Pose4x4 | OutputKind::PoseQuat => {
@@ -221,13 +220,10 @@ impl PoseEstimator for OnnxEstimator {
                     outputs["pose"].try_extract_tensor::<f32>().map_err(|e| err(e.to_string()))?;
                 let v: Vec<f64> = v.iter().map(|&x| x as f64).collect();
                 let p = if v.len() == 16 {
-                    pose::Pose::from_row_slice(&v)
+                    pose::from_matrix_checked(&Matrix4::from_row_slice(&v))
                 } else if v.len() == 7 {
-                    let qn = (v[0] * v[0] + v[1] * v[1] + v[2] * v[2] + v[3] * v[3]).sqrt();
-                    if !(qn.is_finite() && qn > 1e-6) {
-                        return Ok(Estimate::lost());
-                    }
-                    pose::from_quat_t([v[0], v[1], v[2], v[3]], [v[4], v[5], v[6]])
+                    // The contract's order is qw qx qy qz tx ty tz.
+                    pose::from_quat_xyzw_t([v[1], v[2], v[3], v[0]], [v[4], v[5], v[6]])
                 } else {
                     return Err(err(format!(
                         "pose output has {} values, expected 16 or 7",
@@ -265,7 +261,7 @@ impl PoseEstimator for OnnxEstimator {
                     px.push((kp[2 * i] as f64, kp[2 * i + 1] as f64));
                 }
                 match pnp::solve_pnp(&body, &px, &frame.intrinsics) {
-                    Ok(p) => Ok(direct(p)),
+                    Ok(p) => Ok(direct(Some(p).filter(pose::is_rigid))),
                     Err(_) => Ok(Estimate::lost()),
                 }
             }

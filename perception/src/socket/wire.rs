@@ -8,8 +8,9 @@
 
 use crate::estimator::{Estimate, EstimateKind};
 use crate::models::Mesh;
-use crate::pose::{self, Pose};
 use crate::PerceptionFrame;
+use hitl_hal::pose;
+use nalgebra::Matrix4;
 use serde::Deserialize;
 use serde_json::{json, Map, Value};
 
@@ -314,10 +315,9 @@ pub(crate) fn estimate_from(reply: &PoseReply) -> Result<Estimate, String> {
     if let Some(i) = values.iter().position(|v| !v.is_finite()) {
         return Err(format!("pose element {i} is not finite"));
     }
-    let p = Pose::from_row_slice(values);
-    if !pose::is_rigid(&p) {
+    let Some(p) = pose::from_matrix_checked(&Matrix4::from_row_slice(values)) else {
         return Ok(Estimate::lost());
-    }
+    };
     Ok(Estimate {
         pose: Some(p),
         kind: kind.unwrap_or(EstimateKind::Direct),

@@ -16,11 +16,11 @@
 
 use super::summary::{secs, t0};
 use super::ReportError;
-use crate::msg::Pose;
 use crate::reader::{decode_image, depth_metres, visit, Recording};
 use crate::topics;
 use foxglove::messages as fg;
 use hitl_hal::Intrinsics;
+use hitl_hal::{pose, Pose};
 use serde::Serialize;
 use std::collections::{BTreeMap, HashMap};
 use std::ops::ControlFlow;
@@ -192,12 +192,11 @@ impl Silhouette {
 /// centres). Triangles reaching behind the camera's near plane are left out.
 pub fn rasterize(mesh: &TargetMesh, pose: &Pose, k: &Intrinsics) -> Silhouette {
     let mut s = Silhouette::empty(k.width, k.height);
-    let iso = pose.isometry();
     let projected: Vec<Option<[f64; 2]>> = mesh
         .vertices
         .iter()
         .map(|v| {
-            let p = iso.transform_point(&nalgebra::Point3::from(*v));
+            let p = pose.transform_point(&nalgebra::Point3::from(*v));
             let (u, w) = (k.fx * p.x / p.z + k.cx, k.fy * p.y / p.z + k.cy);
             (p.z > NEAR_M && u.is_finite() && w.is_finite()).then_some([u, w])
         })
@@ -550,7 +549,7 @@ pub fn write_contact_sheet(
         write_png(&path, ow, oh, &rgb)
             .map_err(|e| ReportError::Io { path: path.display().to_string(), source: e })?;
         files.push(path);
-        let errors = est_pose.zip(gt_pose).map(|(e, g)| (e.distance_to(&g), e.angle_to(&g)));
+        let errors = est_pose.zip(gt_pose).map(|(e, g)| pose::difference(&e, &g));
         sheet.frames.push(ContactFrame {
             capture: i,
             capture_ns: t,
@@ -672,11 +671,7 @@ mod tests {
     fn a_square_fills_the_pixels_whose_centres_it_covers() {
         // 20x10, f = 10, centre (9.5, 4.5); a square of half-size 0.3 m at 1 m spans 3 px either
         // side of the centre: x in [6.5, 12.5] -> 7..=12, y in [1.5, 7.5] -> 2..=7.
-        let s = rasterize(
-            &square(0.3, 0.0),
-            &Pose { translation: [0.0, 0.0, 1.0], rotation: [0.0, 0.0, 0.0, 1.0] },
-            &k(20, 10, 10.0),
-        );
+        let s = rasterize(&square(0.3, 0.0), &Pose::translation(0.0, 0.0, 1.0), &k(20, 10, 10.0));
         for y in 0..10 {
             for x in 0..20 {
                 assert_eq!(
@@ -695,7 +690,7 @@ mod tests {
 
     #[test]
     fn behind_the_camera_draws_nothing() {
-        let p = Pose { translation: [0.0, 0.0, -1.0], rotation: [0.0, 0.0, 0.0, 1.0] };
+        let p = Pose::translation(0.0, 0.0, -1.0);
         assert_eq!(rasterize(&square(0.3, 0.0), &p, &k(20, 10, 10.0)).area(), 0);
     }
 
@@ -707,10 +702,7 @@ mod tests {
         let (ow, oh) = sheet_size(w, h, 480);
         assert_eq!((ow, oh), (480, 300));
         let a = 0.4f64;
-        let pose = Pose {
-            translation: [0.12, -0.05, 1.5],
-            rotation: [(a / 2.0).sin(), 0.0, 0.0, (a / 2.0).cos()],
-        };
+        let pose = Pose::new(nalgebra::Vector3::new(0.12, -0.05, 1.5), nalgebra::Vector3::x() * a);
         let mesh = square(0.25, 0.0);
         let full = rasterize(&mesh, &pose, &full_k);
         let shrunk = shrink_silhouette(&full, ow, oh);

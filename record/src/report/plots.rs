@@ -245,7 +245,7 @@ fn path_panel<DB: DrawingBackend>(
 /// The camera's position in the target frame (from `/tf`), two projections.
 pub fn camera_path(rec: &Recording, out: &Path) -> Res {
     let pts: Vec<[f64; 3]> = thin(
-        &rec.tf.iter().map(|t| t.camera_in_target().translation).collect::<Vec<_>>(),
+        &rec.tf.iter().map(|t| t.camera_in_target().translation.vector.into()).collect::<Vec<_>>(),
         MAX_POINTS,
     );
     let root = SVGBackend::new(out, (1100, 520)).into_drawing_area();

@@ -137,7 +137,8 @@ pub fn pose_errors(rec: &Recording) -> Vec<(f64, f64, f64)> {
         .filter_map(|e| {
             let i = rec.pose_gt.binary_search_by_key(&e.capture_ns, |g| g.capture_ns).ok()?;
             let g = &rec.pose_gt[i];
-            Some((secs(e.capture_ns, t0), e.pose.distance_to(&g.pose), e.pose.angle_to(&g.pose)))
+            let (dt, dr) = hitl_hal::pose::difference(&e.pose, &g.pose);
+            Some((secs(e.capture_ns, t0), dt, dr))
         })
         .collect()
 }

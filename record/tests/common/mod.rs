@@ -2,8 +2,9 @@
 
 #![allow(dead_code)]
 
-use hitl_hal::Intrinsics;
+use hitl_hal::{Intrinsics, Pose};
 use hitl_record::*;
+use nalgebra::{Translation3, UnitQuaternion, Vector3};
 use std::path::Path;
 use std::process::Command;
 
@@ -21,7 +22,7 @@ pub fn depth_value(k: u64, i: usize) -> f32 {
 
 pub fn frame(k: u64, t_ns: u64, with_pose: bool) -> FrameRecord {
     let n = (W * H) as usize;
-    let gt = Pose { translation: [0.01 * k as f64, 0.0, 1.0], rotation: [0.0, 0.0, 0.0, 1.0] };
+    let gt = Pose::translation(0.01 * k as f64, 0.0, 1.0);
     FrameRecord {
         tick: k * 10,
         capture_ns: t_ns,
@@ -52,12 +53,12 @@ pub fn tf_at(t_ns: u64, k: u64) -> TfMsg {
     let a = 0.1 * k as f64;
     TfMsg {
         t_ns,
-        base_flange: Pose {
-            translation: [0.3 + 0.01 * k as f64, 0.0, 0.4],
-            rotation: [0.0, 0.0, (a / 2.0).sin(), (a / 2.0).cos()],
-        },
-        flange_camera: Pose { translation: [0.0, 0.0, 0.05], rotation: [0.0, 0.0, 0.0, 1.0] },
-        base_target: Pose { translation: [0.8, 0.0, 0.4], rotation: [0.0, 0.0, 0.0, 1.0] },
+        base_flange: Pose::from_parts(
+            Translation3::new(0.3 + 0.01 * k as f64, 0.0, 0.4),
+            UnitQuaternion::from_axis_angle(&Vector3::z_axis(), a),
+        ),
+        flange_camera: Pose::translation(0.0, 0.0, 0.05),
+        base_target: Pose::translation(0.8, 0.0, 0.4),
     }
 }
 

@@ -38,12 +38,6 @@ pub(super) fn target_scene(req: &RunRequest, traj: &Trajectory) -> Result<Target
     Ok(TargetScene { model, scale })
 }
 
-/// A perception pose (4x4 matrix) as the recorder's pose.
-pub(super) fn record_pose(m: &nalgebra::Matrix4<f64>) -> hitl_record::Pose {
-    let rows: [[f64; 4]; 4] = std::array::from_fn(|i| std::array::from_fn(|j| m[(i, j)]));
-    hitl_record::Pose::from_matrix(&rows)
-}
-
 /// Start the recorder, when asked: the `run` metadata record first.
 pub(super) fn start_recorder(
     req: &RunRequest,

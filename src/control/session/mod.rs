@@ -37,9 +37,7 @@ use crate::devices::{self as run_devices, CameraSpec, DeviceChoice, DeviceError,
 use crate::exit;
 use crate::rt::{self, slot::LatestSlot, slot::SlotReader, RtOptions};
 use arm_link::{connect_reports, first_report, resolve, spawn_report_reader};
-use devices::{
-    collect_late_frames, record_pose, start_live, start_recorder, target_scene, TargetScene,
-};
+use devices::{collect_late_frames, start_live, start_recorder, target_scene, TargetScene};
 use hitl_hal::{Arm, ArmState, Joints, MonotonicClock};
 use hitl_perception::{backend_from_spec, spawn_worker, BackendSpec, ReregisterPolicy};
 use hitl_record::{
@@ -474,10 +472,10 @@ impl CapturePath {
                             let mut n = 0u64;
                             while let Some(r) = results.recv().await {
                                 if let (Ok(est), Some(sink)) = (&r.estimate, &sink) {
-                                    if let Some(m) = est.pose {
+                                    if let Some(pose) = est.pose {
                                         sink.push_pose_estimate(&PoseStamped {
                                             capture_ns: r.timestamp_ns,
-                                            pose: record_pose(&m),
+                                            pose,
                                         });
                                     }
                                 }
