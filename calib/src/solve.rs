@@ -20,7 +20,7 @@
 //! (integer coordinates at pixel centres).
 
 use crate::detect::Corner;
-use hitl_hal::Intrinsics;
+use hitl_hal::{Intrinsics, Pose};
 use nalgebra::{
     DMatrix, DVector, Isometry3, Matrix3, Point3, SMatrix, Translation3, UnitQuaternion, Vector3,
 };
@@ -29,7 +29,7 @@ use nalgebra::{
 #[derive(Debug, Clone)]
 pub struct View {
     /// Base -> flange (forward kinematics of the joints at exposure).
-    pub base_flange: Isometry3<f64>,
+    pub base_flange: Pose,
     pub corners: Vec<Corner>,
 }
 
@@ -90,12 +90,12 @@ pub struct Sigma {
 #[derive(Debug, Clone)]
 pub struct Solution {
     /// Flange -> camera (OpenCV axes).
-    pub camera_mount: Isometry3<f64>,
+    pub camera_mount: Pose,
     /// Base -> board.
-    pub board_in_base: Isometry3<f64>,
+    pub board_in_base: Pose,
     /// The closed form's estimate before refinement (same frames).
-    pub shah_camera_mount: Isometry3<f64>,
-    pub shah_board_in_base: Isometry3<f64>,
+    pub shah_camera_mount: Pose,
+    pub shah_board_in_base: Pose,
     pub rms_px: f64,
     pub view_rms_px: Vec<f64>,
     pub camera_sigma: Sigma,
@@ -110,7 +110,7 @@ fn project(k: &Intrinsics, p: &Point3<f64>) -> Option<(f64, f64)> {
     (p.z > 1e-6).then(|| (k.fx * p.x / p.z + k.cx, k.fy * p.y / p.z + k.cy))
 }
 
-fn increment(d: &[f64]) -> Isometry3<f64> {
+fn increment(d: &[f64]) -> Pose {
     Isometry3::new(Vector3::new(d[0], d[1], d[2]), Vector3::new(d[3], d[4], d[5]))
 }
 
@@ -127,13 +127,13 @@ fn nearest_rotation(m: &Matrix3<f64>) -> Matrix3<f64> {
     u * d * vt
 }
 
-fn iso(r: &Matrix3<f64>, t: &Vector3<f64>) -> Isometry3<f64> {
+fn iso(r: &Matrix3<f64>, t: &Vector3<f64>) -> Pose {
     Isometry3::from_parts(Translation3::from(*t), UnitQuaternion::from_matrix(r))
 }
 
 /// The board's pose in the camera (board -> camera) from one view's corners, or `None` when
 /// they do not determine one (fewer than 4, or degenerate).
-pub fn planar_pose(corners: &[Corner], k: &Intrinsics) -> Option<Isometry3<f64>> {
+pub fn planar_pose(corners: &[Corner], k: &Intrinsics) -> Option<Pose> {
     if corners.len() < 4 {
         return None;
     }
@@ -191,11 +191,7 @@ fn res_len(c: &[Corner]) -> usize {
     2 * c.len()
 }
 
-fn view_residuals(
-    corners: &[Corner],
-    k: &Intrinsics,
-    cam_board: &Isometry3<f64>,
-) -> Option<Vec<f64>> {
+fn view_residuals(corners: &[Corner], k: &Intrinsics, cam_board: &Pose) -> Option<Vec<f64>> {
     let mut r = Vec::with_capacity(2 * corners.len());
     for c in corners {
         let (u, v) = project(k, &(cam_board * c.board))?;
@@ -227,10 +223,7 @@ fn numeric_jacobian<const N: usize>(
 }
 
 /// Shah's closed form for `A_i X = Z B_i` (all rigid transforms): `(X, Z)`.
-pub fn shah(
-    a: &[Isometry3<f64>],
-    b: &[Isometry3<f64>],
-) -> Option<(Isometry3<f64>, Isometry3<f64>)> {
+pub fn shah(a: &[Pose], b: &[Pose]) -> Option<(Pose, Pose)> {
     let n = a.len();
     if n < 3 || b.len() != n {
         return None;
@@ -283,12 +276,7 @@ pub fn shah(
     Some((iso(&rx, &tx), iso(&rz, &tz)))
 }
 
-fn all_residuals(
-    views: &[View],
-    k: &Intrinsics,
-    x: &Isometry3<f64>,
-    z: &Isometry3<f64>,
-) -> Option<Vec<f64>> {
+fn all_residuals(views: &[View], k: &Intrinsics, x: &Pose, z: &Pose) -> Option<Vec<f64>> {
     let mut r = Vec::new();
     let xinv = x.inverse();
     for v in views {
@@ -402,15 +390,10 @@ pub fn solve(views: &[View], k: &Intrinsics, acc: &Acceptance) -> Result<Solutio
 
 /// Levenberg-Marquardt on all reprojection errors from `(x0, z0)`, with the covariance of the
 /// result. `None` when a corner falls behind the camera or the normal equations are singular.
-pub fn refine(
-    views: &[View],
-    k: &Intrinsics,
-    x0: Isometry3<f64>,
-    z0: Isometry3<f64>,
-) -> Option<Solution> {
+pub fn refine(views: &[View], k: &Intrinsics, x0: Pose, z0: Pose) -> Option<Solution> {
     let m: usize = views.iter().map(|v| res_len(&v.corners)).sum();
     let (mut x, mut z) = (x0, z0);
-    let f = |x: &Isometry3<f64>, z: &Isometry3<f64>, d: &[f64]| {
+    let f = |x: &Pose, z: &Pose, d: &[f64]| {
         all_residuals(views, k, &(x * increment(&d[0..6])), &(z * increment(&d[6..12])))
     };
     let mut lambda = 1e-3;
@@ -495,7 +478,7 @@ fn pose_sigma(c: &SMatrix<f64, 6, 6>) -> Sigma {
 /// Sigma of `z * p` (e.g. the target = board pose times board -> target) given the covariance of
 /// `z`'s local increment: the board offset's lever arm turns rotation uncertainty into
 /// translation uncertainty.
-pub fn composed_sigma(c: &SMatrix<f64, 6, 6>, z: &Isometry3<f64>, p: &Isometry3<f64>) -> Sigma {
+pub fn composed_sigma(c: &SMatrix<f64, 6, 6>, z: &Pose, p: &Pose) -> Sigma {
     let t0 = z * p;
     let mut j = SMatrix::<f64, 6, 6>::zeros();
     let h = 1e-7;
@@ -513,7 +496,7 @@ pub fn composed_sigma(c: &SMatrix<f64, 6, 6>, z: &Isometry3<f64>, p: &Isometry3<
 }
 
 /// Difference between two poses: translation (metres) and rotation angle (degrees).
-pub fn pose_difference(a: &Isometry3<f64>, b: &Isometry3<f64>) -> (f64, f64) {
+pub fn pose_difference(a: &Pose, b: &Pose) -> (f64, f64) {
     let dt = (a.translation.vector - b.translation.vector).norm();
     let dr = a.rotation.angle_to(&b.rotation).to_degrees();
     (dt, dr)

@@ -9,7 +9,7 @@
 //! in its middle. The caller preflights it like any trajectory.
 
 use crate::board::Board;
-use hitl_hal::Intrinsics;
+use hitl_hal::{Intrinsics, Pose};
 use hitl_trajectories::ik::{self, IkOptions, Scene};
 use hitl_trajectories::kinematics::{Joints, DOF};
 use hitl_trajectories::lab::LabConfig;
@@ -19,7 +19,7 @@ use nalgebra::{Isometry3, Point3, Rotation3, UnitQuaternion, Vector3};
 /// One planned view: the camera pose (base frame, OpenCV axes) and the joints that reach it.
 #[derive(Debug, Clone)]
 pub struct PlannedView {
-    pub camera_in_base: Isometry3<f64>,
+    pub camera_in_base: Pose,
     pub q: Joints,
 }
 
@@ -81,15 +81,15 @@ fn pattern() -> Vec<(f64, f64, f64, f64)> {
 }
 
 /// The board's corners that must be in view, in the base frame, for `lab`'s nominal placement.
-pub fn board_in_base(lab: &LabConfig, board: &Board) -> Isometry3<f64> {
+pub fn board_in_base(lab: &LabConfig, board: &Board) -> Pose {
     lab.target_in_base() * board.placement.board_in_target()
 }
 
 /// Where the board's corners fall in an image taken from `camera` (None: behind the camera).
 pub fn board_pixels(
     board: &Board,
-    board_in_base: &Isometry3<f64>,
-    camera: &Isometry3<f64>,
+    board_in_base: &Pose,
+    camera: &Pose,
     k: &Intrinsics,
 ) -> Option<Vec<(f64, f64)>> {
     let cam_board = camera.inverse() * board_in_base;

@@ -38,10 +38,9 @@ use crate::mujoco_plant::{ArmSample, LabModel, SharedArmState};
 use crossbeam::atomic::AtomicCell;
 use crossbeam::channel::{self, Receiver, Sender, TryRecvError, TrySendError};
 use hitl_hal::{
-    CaptureRequest, Clock, ErrorKind, ErrorType, Intrinsics, Joints, MonotonicClock, RgbdCamera,
-    RgbdFrame, StreamConfig, TimestampSource,
+    CaptureRequest, Clock, ErrorKind, ErrorType, Intrinsics, Joints, MonotonicClock, Pose,
+    RgbdCamera, RgbdFrame, StreamConfig, TimestampSource,
 };
-use nalgebra::Isometry3;
 use std::sync::atomic::{AtomicU64, Ordering};
 use std::sync::Arc;
 use std::thread::JoinHandle;
@@ -81,9 +80,9 @@ pub struct RenderTruth {
     /// Light level at the exposure.
     pub light_level: f32,
     /// The camera pose (OpenCV axes) in the arm-base frame from the model's kinematics at `q`.
-    pub camera_in_base: Isometry3<f64>,
+    pub camera_in_base: Pose,
     /// The pose actually rendered from (the nominal pose turned by the sigma_theta noise).
-    pub rendered_camera_in_base: Isometry3<f64>,
+    pub rendered_camera_in_base: Pose,
     /// The principal point shift of the sigma_px noise, pixels.
     pub shift_px: [f64; 2],
 }
@@ -370,13 +369,13 @@ pub trait Draw {
     /// Put the arm at `q` and compute the kinematics.
     fn set_joints(&mut self, q: &Joints);
     /// Camera pose (OpenCV axes) in the lab frame for the current joints.
-    fn camera_in_lab(&self) -> Isometry3<f64>;
+    fn camera_in_lab(&self) -> Pose;
     /// The arm base's pose in the lab frame.
-    fn base_in_lab(&self) -> Isometry3<f64>;
+    fn base_in_lab(&self) -> Pose;
     /// Render from `camera` (OpenCV axes, lab frame), principal point moved by `shift_px`.
     fn render_from(
         &mut self,
-        camera: &Isometry3<f64>,
+        camera: &Pose,
         intr: &Intrinsics,
         level: f32,
         shift_px: [f64; 2],
@@ -388,15 +387,15 @@ impl Draw for Renderer {
     fn set_joints(&mut self, q: &Joints) {
         Renderer::set_joints(self, q)
     }
-    fn camera_in_lab(&self) -> Isometry3<f64> {
+    fn camera_in_lab(&self) -> Pose {
         Renderer::camera_in_lab(self)
     }
-    fn base_in_lab(&self) -> Isometry3<f64> {
+    fn base_in_lab(&self) -> Pose {
         Renderer::base_in_lab(self)
     }
     fn render_from(
         &mut self,
-        camera: &Isometry3<f64>,
+        camera: &Pose,
         intr: &Intrinsics,
         level: f32,
         shift_px: [f64; 2],
@@ -410,15 +409,15 @@ impl Draw for GlRenderer {
     fn set_joints(&mut self, q: &Joints) {
         GlRenderer::set_joints(self, q)
     }
-    fn camera_in_lab(&self) -> Isometry3<f64> {
+    fn camera_in_lab(&self) -> Pose {
         GlRenderer::camera_in_lab(self)
     }
-    fn base_in_lab(&self) -> Isometry3<f64> {
+    fn base_in_lab(&self) -> Pose {
         GlRenderer::base_in_lab(self)
     }
     fn render_from(
         &mut self,
-        camera: &Isometry3<f64>,
+        camera: &Pose,
         intr: &Intrinsics,
         level: f32,
         shift_px: [f64; 2],

@@ -28,10 +28,11 @@ use crate::target_look::{write_assets, write_target};
 pub use crate::target_look::{
     TargetMaterial, TargetModel, TargetPart, TargetTexture, TriangleMesh,
 };
+use hitl_hal::Pose;
 use hitl_trajectories::kinematics::{self, CHAIN, DOF, LINK_RADII};
 use hitl_trajectories::lab::{LabConfig, SceneKind};
 use hitl_trajectories::planner::mapping;
-use nalgebra::{Isometry3, Matrix3, Point3, UnitQuaternion, Vector3};
+use nalgebra::{Matrix3, Point3, UnitQuaternion, Vector3};
 use std::fmt::Write as _;
 
 /// Joint names, joint 1 first. A user scene must use these names.
@@ -130,7 +131,7 @@ fn quat_attr(q: &UnitQuaternion<f64>) -> String {
     nums(&[q.w, q.i, q.j, q.k])
 }
 
-fn frame_attrs(pose: &Isometry3<f64>) -> String {
+fn frame_attrs(pose: &Pose) -> String {
     format!("pos=\"{}\" quat=\"{}\"", pos_attr(&pose.translation.vector), quat_attr(&pose.rotation))
 }
 

@@ -6,8 +6,8 @@
 
 use crate::mjcf::TARGET_BODY;
 use crate::mujoco_plant::StubSceneError;
+use hitl_hal::Pose;
 use hitl_trajectories::lab::LabConfig;
-use nalgebra::Isometry3;
 use std::fmt::Write as _;
 use std::path::PathBuf;
 
@@ -285,7 +285,7 @@ pub(crate) fn write_assets(x: &mut String, target: &TargetModel) {
 
 /// The target's body at `pose` (MJCF `pos`/`quat` attributes of the lab frame), its geoms in
 /// the `target` class.
-pub(crate) fn write_target(x: &mut String, pose: &Isometry3<f64>, target: &TargetModel) {
+pub(crate) fn write_target(x: &mut String, pose: &Pose, target: &TargetModel) {
     let t = pose.translation.vector;
     let q = pose.rotation;
     let _ = writeln!(

@@ -4,7 +4,8 @@
 //! with a radius. A sphere is a capsule with `a == b`. Distances are between surfaces, so a
 //! negative distance means the two volumes overlap.
 
-use nalgebra::{Isometry3, Point3, Vector3};
+use hitl_hal::Pose;
+use nalgebra::{Point3, Vector3};
 use serde::{Deserialize, Serialize};
 
 /// A segment swept by a sphere.
@@ -25,7 +26,7 @@ impl Capsule {
     }
 
     /// This capsule moved by `pose`.
-    pub fn transformed(&self, pose: &Isometry3<f64>) -> Self {
+    pub fn transformed(&self, pose: &Pose) -> Self {
         Self { a: pose * self.a, b: pose * self.b, radius: self.radius }
     }
 

@@ -17,7 +17,8 @@ pub use clearance::{Nearest, Scene, SELF_MARGIN_M};
 use crate::joint_table::JointTable;
 use crate::kinematics::{camera_pose, link_frames, Joints, DOF};
 use crate::lab::LabConfig;
-use nalgebra::{Isometry3, Matrix6, SMatrix, SVector, Vector3, Vector6};
+use hitl_hal::Pose;
+use nalgebra::{Matrix6, SMatrix, SVector, Vector3, Vector6};
 use std::f64::consts::{FRAC_PI_2, PI};
 
 /// The 6x7 geometric Jacobian: rows are linear (x, y, z) then angular (x, y, z) velocity of the
@@ -81,7 +82,7 @@ impl IkOptions {
 }
 
 /// Camera pose and its geometric Jacobian at `q`.
-pub fn camera_jacobian(q: &Joints, mount: &Isometry3<f64>) -> (Isometry3<f64>, Jacobian) {
+pub fn camera_jacobian(q: &Joints, mount: &Pose) -> (Pose, Jacobian) {
     let f = link_frames(q);
     let cam = f[DOF] * mount;
     let p = cam.translation.vector;
@@ -97,7 +98,7 @@ pub fn camera_jacobian(q: &Joints, mount: &Isometry3<f64>) -> (Isometry3<f64>, J
 }
 
 /// Pose error `target - current` as (position, rotation vector), both in the base frame.
-pub fn pose_error(target: &Isometry3<f64>, current: &Isometry3<f64>) -> Vector6<f64> {
+pub fn pose_error(target: &Pose, current: &Pose) -> Vector6<f64> {
     let dp = target.translation.vector - current.translation.vector;
     let dr = (target.rotation * current.rotation.inverse()).scaled_axis();
     Vector6::new(dp.x, dp.y, dp.z, dr.x, dr.y, dr.z)
@@ -178,9 +179,9 @@ fn clamp_to_limits(q: &mut Joints, limits: &[(f64, f64); DOF], margin: f64) {
 
 /// Solve for the camera pose `target` from `seed`.
 pub fn solve(
-    target: &Isometry3<f64>,
+    target: &Pose,
     seed: &Joints,
-    mount: &Isometry3<f64>,
+    mount: &Pose,
     scene: Option<&Scene>,
     opts: &IkOptions,
 ) -> IkSolution {
@@ -330,10 +331,10 @@ const MARCH_STEPS: usize = 8;
 /// Solve `target` from the previous solution `prev` (at pose `prev_pose`) by marching through
 /// interpolated poses, so the solution stays on `prev`'s branch even for a large waypoint step.
 fn march(
-    prev_pose: &Isometry3<f64>,
-    target: &Isometry3<f64>,
+    prev_pose: &Pose,
+    target: &Pose,
     prev: &Joints,
-    mount: &Isometry3<f64>,
+    mount: &Pose,
     scene: Option<&Scene>,
     opts: &IkOptions,
 ) -> (IkSolution, usize) {
@@ -357,7 +358,7 @@ fn march(
 }
 
 /// How far a camera pose moves: translation plus rotation times a 0.1 m lever.
-fn pose_step(a: &Isometry3<f64>, b: &Isometry3<f64>) -> f64 {
+fn pose_step(a: &Pose, b: &Pose) -> f64 {
     let e = pose_error(b, a);
     e.fixed_rows::<3>(0).norm() + 0.1 * e.fixed_rows::<3>(3).norm()
 }
@@ -368,9 +369,9 @@ fn pose_step(a: &Isometry3<f64>, b: &Isometry3<f64>) -> f64 {
 /// interpolated poses; only a step that stays large is a branch jump. After a failed waypoint
 /// the next one starts again from the last good solution (or the seed).
 pub fn track(
-    poses: &[Isometry3<f64>],
+    poses: &[Pose],
     seed: &Joints,
-    mount: &Isometry3<f64>,
+    mount: &Pose,
     scene: Option<&Scene>,
     opts: &IkOptions,
 ) -> Track {
@@ -382,7 +383,7 @@ pub fn track(
         cost: 0.0,
     };
     let mut warm = *seed;
-    let mut prev: Option<(Joints, Isometry3<f64>)> = None;
+    let mut prev: Option<(Joints, Pose)> = None;
     // The self-motion per waypoint is scaled by how far the pose moves (against the path's
     // largest step), so the arm comes to rest with the pose at rest-to-rest ends.
     let steps: Vec<f64> =
@@ -430,7 +431,7 @@ pub fn track(
 
 /// Deterministic seeds for the first waypoint: elbow and wrist bends around a forward-reaching
 /// posture, shoulder yawed toward the goal.
-pub fn seeds(goal: &Isometry3<f64>) -> Vec<Joints> {
+pub fn seeds(goal: &Pose) -> Vec<Joints> {
     let p = goal.translation.vector;
     let yaw = p.y.atan2(p.x);
     let mut out = Vec::new();
@@ -450,8 +451,8 @@ pub fn seeds(goal: &Isometry3<f64>) -> Vec<Joints> {
 /// The `keep` best are then refined along their self-motion (many null-space steps) so that the
 /// arm starts near the redundancy optimum and barely drifts while the pose is still at rest.
 pub fn solve_from_seeds(
-    target: &Isometry3<f64>,
-    mount: &Isometry3<f64>,
+    target: &Pose,
+    mount: &Pose,
     scene: Option<&Scene>,
     opts: &IkOptions,
     keep: usize,
@@ -485,6 +486,6 @@ pub fn solve_from_seeds(
 }
 
 /// Forward check of a solution: camera pose at `q` (for tests and reports).
-pub fn camera_at(q: &Joints, mount: &Isometry3<f64>) -> Isometry3<f64> {
+pub fn camera_at(q: &Joints, mount: &Pose) -> Pose {
     camera_pose(q, mount)
 }

@@ -7,6 +7,7 @@
 //! its z axis pointing down.
 
 use crate::geometry::Capsule;
+use hitl_hal::Pose;
 use nalgebra::{Isometry3, Point3, Translation3, UnitQuaternion, Vector3};
 use std::f64::consts::{FRAC_PI_2, PI};
 
@@ -34,7 +35,7 @@ pub const CHAIN: [([f64; 3], f64); DOF] = [
 pub const MAX_JOINT_SPEED: f64 = PI;
 
 /// The fixed offset of body `i` (0-based, link i+1) in its parent, before its joint turns.
-pub fn body_offset(i: usize) -> Isometry3<f64> {
+pub fn body_offset(i: usize) -> Pose {
     let (p, rx) = CHAIN[i];
     Isometry3::from_parts(
         Translation3::new(p[0], p[1], p[2]),
@@ -43,7 +44,7 @@ pub fn body_offset(i: usize) -> Isometry3<f64> {
 }
 
 /// Poses of the base (index 0) and of links 1-7 (indices 1-7) in the base frame.
-pub fn link_frames(q: &Joints) -> [Isometry3<f64>; DOF + 1] {
+pub fn link_frames(q: &Joints) -> [Pose; DOF + 1] {
     let mut frames = [Isometry3::identity(); DOF + 1];
     let mut pose = Isometry3::identity();
     for i in 0..DOF {
@@ -54,12 +55,12 @@ pub fn link_frames(q: &Joints) -> [Isometry3<f64>; DOF + 1] {
 }
 
 /// Flange (link 7) pose in the base frame.
-pub fn flange_pose(q: &Joints) -> Isometry3<f64> {
+pub fn flange_pose(q: &Joints) -> Pose {
     link_frames(q)[DOF]
 }
 
 /// Camera pose (OpenCV axes) in the base frame, for a flange-to-camera mount.
-pub fn camera_pose(q: &Joints, mount: &Isometry3<f64>) -> Isometry3<f64> {
+pub fn camera_pose(q: &Joints, mount: &Pose) -> Pose {
     flange_pose(q) * mount
 }
 
@@ -105,7 +106,7 @@ impl Default for CameraBody {
 
 /// The capsule model of the arm at `q`, in the base frame: six link capsules, the flange and the
 /// camera body. Index order is [`CAPSULE_NAMES`].
-pub fn arm_capsules(q: &Joints, mount: &Isometry3<f64>, camera: &CameraBody) -> [Capsule; 8] {
+pub fn arm_capsules(q: &Joints, mount: &Pose, camera: &CameraBody) -> [Capsule; 8] {
     let f = link_frames(q);
     let o = |i: usize| Point3::from(f[i].translation.vector);
     let flange = f[DOF];

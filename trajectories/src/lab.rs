@@ -8,6 +8,7 @@
 use crate::geometry::Capsule;
 use crate::joint_table::JointTable;
 use crate::kinematics::{CameraBody, DOF, MAX_JOINT_SPEED};
+use hitl_hal::Pose;
 use nalgebra::{Isometry3, Point3, Translation3, UnitQuaternion, Vector3};
 use serde::{Deserialize, Serialize};
 use std::path::Path;
@@ -419,7 +420,7 @@ impl LabConfig {
     }
 
     /// The arm base's pose in the lab frame.
-    pub fn base_in_lab(&self) -> Isometry3<f64> {
+    pub fn base_in_lab(&self) -> Pose {
         let p = self.arm.base_in_lab_m;
         Isometry3::from_parts(
             Translation3::new(p[0], p[1], p[2]),
@@ -428,13 +429,13 @@ impl LabConfig {
     }
 
     /// Flange-to-camera transform (camera in OpenCV axes).
-    pub fn camera_mount(&self) -> Isometry3<f64> {
+    pub fn camera_mount(&self) -> Pose {
         let t = self.camera.translation_m;
         Isometry3::from_parts(Translation3::new(t[0], t[1], t[2]), rpy(&self.camera.rpy_deg))
     }
 
     /// The target's pose in the base frame.
-    pub fn target_in_base(&self) -> Isometry3<f64> {
+    pub fn target_in_base(&self) -> Pose {
         let p = self.target.position_base_m;
         Isometry3::from_parts(Translation3::new(p[0], p[1], p[2]), rpy(&self.target.rpy_deg))
     }
@@ -509,7 +510,7 @@ impl Default for BoardPlacement {
 
 impl BoardPlacement {
     /// The board frame in the target frame.
-    pub fn board_in_target(&self) -> Isometry3<f64> {
+    pub fn board_in_target(&self) -> Pose {
         let p = self.position_target_m;
         Isometry3::from_parts(Translation3::new(p[0], p[1], p[2]), rpy(&self.rpy_deg))
     }

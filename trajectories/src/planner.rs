@@ -20,8 +20,9 @@ use crate::kinematics::{Joints, DOF};
 use crate::lab::LabConfig;
 use crate::orbit::{self, ChiefOrbit, Preset, Roe};
 use crate::Trajectory;
+use hitl_hal::Pose;
 use mapping::{look_at, up_reference};
-use nalgebra::{Isometry3, Matrix3, Point3, Vector3};
+use nalgebra::{Matrix3, Point3, Vector3};
 use schedule::Schedule;
 use std::f64::consts::TAU;
 
@@ -156,7 +157,7 @@ pub struct OrbitPath {
     pub u: Vec<f64>,
     pub pass: Vec<usize>,
     pub rel_rtn: Vec<Vector3<f64>>,
-    pub cam_pose: Vec<Isometry3<f64>>,
+    pub cam_pose: Vec<Pose>,
 }
 
 fn request_error(m: impl Into<String>) -> PlanError {
@@ -390,7 +391,7 @@ fn does_not_fit(
     path: &OrbitPath,
     track: Option<&ik::Track>,
     scene: &Scene,
-    mount: &Isometry3<f64>,
+    mount: &Pose,
     opts: &IkOptions,
 ) -> PlanError {
     let max_range = path
@@ -552,7 +553,7 @@ fn assemble(
 }
 
 /// A pose as a row-major 4x4 matrix.
-pub fn pose_rows(p: &Isometry3<f64>) -> [[f64; 4]; 4] {
+pub fn pose_rows(p: &Pose) -> [[f64; 4]; 4] {
     let m = p.to_homogeneous();
     let mut out = [[0.0; 4]; 4];
     for (r, row) in out.iter_mut().enumerate() {

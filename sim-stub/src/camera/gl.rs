@@ -30,12 +30,12 @@
 use super::render::{self, Image, Shading};
 use crate::mjcf;
 use crate::mujoco_plant::{LabModel, SunTrack};
-use hitl_hal::{Intrinsics, Joints, DOF};
+use hitl_hal::{Intrinsics, Joints, Pose, DOF};
 use hitl_trajectories::lab::SceneKind;
 use mujoco_rs::prelude::{MjData, MjModel};
 use mujoco_rs::renderer::MjRenderer;
 use mujoco_rs::wrappers::mj_visualization::{MjvCamera, MjvOption};
-use nalgebra::{Isometry3, UnitQuaternion, Vector3};
+use nalgebra::{UnitQuaternion, Vector3};
 
 /// Farthest depth the camera returns, metres (the Orbbec Gemini class reads to about 10 m).
 pub const FAR_M: f64 = 10.0;
@@ -247,12 +247,12 @@ impl GlRenderer {
     }
 
     /// Camera pose (OpenCV axes) in the lab frame for the current joints.
-    pub fn camera_in_lab(&self) -> Isometry3<f64> {
+    pub fn camera_in_lab(&self) -> Pose {
         render::camera_in_lab(&self.lab, &self.data)
     }
 
     /// The arm base's pose in the lab frame.
-    pub fn base_in_lab(&self) -> Isometry3<f64> {
+    pub fn base_in_lab(&self) -> Pose {
         render::base_in_lab(&self.lab, &self.data)
     }
 
@@ -261,7 +261,7 @@ impl GlRenderer {
     /// gives `Err` (the camera reports it as a lost device).
     pub fn render_from(
         &mut self,
-        camera: &Isometry3<f64>,
+        camera: &Pose,
         intr: &Intrinsics,
         level: f32,
         shift_px: [f64; 2],
@@ -342,7 +342,7 @@ impl GlRenderer {
     /// Set the flange camera to `camera` with `intr`'s projection, and the Sun to `level`.
     fn place_camera(
         &mut self,
-        camera: &Isometry3<f64>,
+        camera: &Pose,
         intr: &Intrinsics,
         level: f32,
         shift: [f64; 2],

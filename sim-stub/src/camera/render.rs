@@ -10,7 +10,7 @@
 //! arm first. No hit is black, as the paper's black background.
 
 use crate::mujoco_plant::LabModel;
-use hitl_hal::{Intrinsics, Joints, DOF};
+use hitl_hal::{Intrinsics, Joints, Pose, DOF};
 use mujoco_rs::prelude::{MjData, MjModel};
 use mujoco_rs::wrappers::mj_model::traits::ModelType;
 use nalgebra::{Isometry3, Matrix3, Point3, Rotation3, Translation3, UnitQuaternion, Vector3};
@@ -138,12 +138,12 @@ impl Renderer {
     }
 
     /// Camera pose (OpenCV axes) in the lab frame for the current joints.
-    pub fn camera_in_lab(&self) -> Isometry3<f64> {
+    pub fn camera_in_lab(&self) -> Pose {
         camera_in_lab(&self.lab, &self.data[0])
     }
 
     /// The arm base's pose in the lab frame.
-    pub fn base_in_lab(&self) -> Isometry3<f64> {
+    pub fn base_in_lab(&self) -> Pose {
         base_in_lab(&self.lab, &self.data[0])
     }
 
@@ -165,7 +165,7 @@ impl Renderer {
     /// moved by `shift_px`, Sun at `level` (0..1).
     pub fn render_from(
         &mut self,
-        camera: &Isometry3<f64>,
+        camera: &Pose,
         intr: &Intrinsics,
         level: f32,
         shift_px: [f64; 2],
@@ -296,7 +296,7 @@ impl Pass<'_> {
     }
 }
 
-fn pose(p: &[f64; 3], m: &[f64; 9]) -> Isometry3<f64> {
+fn pose(p: &[f64; 3], m: &[f64; 9]) -> Pose {
     let r = Rotation3::from_matrix_unchecked(Matrix3::new(
         m[0], m[1], m[2], m[3], m[4], m[5], m[6], m[7], m[8],
     ));
@@ -308,7 +308,7 @@ fn pose(p: &[f64; 3], m: &[f64; 9]) -> Isometry3<f64> {
 
 /// Camera pose (OpenCV axes) in the lab frame from `data`'s kinematics: the `camera_cv` site, or
 /// the flange camera turned from MuJoCo's axes (looking down -z, y up).
-pub fn camera_in_lab<M: ModelType>(lab: &LabModel, data: &MjData<M>) -> Isometry3<f64> {
+pub fn camera_in_lab<M: ModelType>(lab: &LabModel, data: &MjData<M>) -> Pose {
     if let Some(s) = lab.camera_site {
         pose(&data.site_xpos()[s], &data.site_xmat()[s])
     } else if let Some(c) = lab.camera {
@@ -320,7 +320,7 @@ pub fn camera_in_lab<M: ModelType>(lab: &LabModel, data: &MjData<M>) -> Isometry
 }
 
 /// The arm base's pose in the lab frame from `data`'s kinematics.
-pub fn base_in_lab<M: ModelType>(lab: &LabModel, data: &MjData<M>) -> Isometry3<f64> {
+pub fn base_in_lab<M: ModelType>(lab: &LabModel, data: &MjData<M>) -> Pose {
     let parents = lab.model.body_parentid();
     match (0..lab.arm_body.len()).find(|&b| lab.arm_body[b] && parents[b] == 0) {
         Some(b) => {

@@ -6,7 +6,8 @@
 use crate::geometry::Capsule;
 use crate::kinematics::{arm_capsules, CameraBody, Joints, CAPSULE_NAMES};
 use crate::lab::LabConfig;
-use nalgebra::{Isometry3, Point3};
+use hitl_hal::Pose;
+use nalgebra::Point3;
 
 /// Self-collision pairs checked (indices into [`CAPSULE_NAMES`]): the hand, flange and camera
 /// against the base column and the upper arm, and the camera against the elbow.
@@ -29,11 +30,11 @@ pub struct Nearest {
 /// Obstacles in the arm-base frame.
 #[derive(Debug, Clone)]
 pub struct Scene {
-    pub mount: Isometry3<f64>,
+    pub mount: Pose,
     pub camera: CameraBody,
     keepouts: Vec<(&'static str, Capsule)>,
     keepout_margin: f64,
-    base_in_lab: Isometry3<f64>,
+    base_in_lab: Pose,
     box_lo: Point3<f64>,
     box_hi: Point3<f64>,
     wall_margin: f64,

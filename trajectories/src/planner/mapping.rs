@@ -12,6 +12,7 @@
 //! through 180 deg. The planner refuses any plan whose optical axis comes within
 //! [`MIN_UP_ANGLE_DEG`] of `w` (the only place the rule would be ill-defined).
 
+use hitl_hal::Pose;
 use nalgebra::{Isometry3, Matrix3, Point3, Rotation3, Translation3, UnitQuaternion, Vector3};
 
 /// The paper's workspace fill fraction alpha.
@@ -76,11 +77,7 @@ pub fn up_reference(rel_rtn: &[Vector3<f64>], rtn_to_base: &Matrix3<f64>) -> Vec
 
 /// The camera pose at `position` looking at `target`, rolled by the up reference `w`. `None` when
 /// the optical axis is within [`MIN_UP_ANGLE_DEG`] of `w` or the camera sits on the target.
-pub fn look_at(
-    position: &Point3<f64>,
-    target: &Point3<f64>,
-    w: &Vector3<f64>,
-) -> Option<Isometry3<f64>> {
+pub fn look_at(position: &Point3<f64>, target: &Point3<f64>, w: &Vector3<f64>) -> Option<Pose> {
     let z = (target - position).try_normalize(1e-9)?;
     let along = w.dot(&z);
     if along.abs() > MIN_UP_ANGLE_DEG.to_radians().cos() {
