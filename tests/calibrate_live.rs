@@ -92,15 +92,15 @@ fn calibrate_recovers_the_hidden_lab_and_refuses_what_it_cannot_solve() {
         (base_flange * lab.camera_mount()).inverse() * lab.target_in_base()
     };
     let worst = rec.tf.iter().fold((0.0f64, 0.0f64), |(wt, wr), tf| {
-        let base_flange = tf.base_flange.isometry();
+        let base_flange = tf.base_flange;
         let (t, r) =
             apart(&truth_in_camera(&got, &base_flange), &truth_in_camera(&truth, &base_flange));
         (wt.max(t), wr.max(r))
     });
     assert!(worst.0 < 1e-3 && worst.1 < 0.1, "recorded truth off by {worst:?} (m, deg)");
     let nominal_off = apart(
-        &truth_in_camera(&nominal, &rec.tf[0].base_flange.isometry()),
-        &truth_in_camera(&truth, &rec.tf[0].base_flange.isometry()),
+        &truth_in_camera(&nominal, &rec.tf[0].base_flange),
+        &truth_in_camera(&truth, &rec.tf[0].base_flange),
     );
     assert!(nominal_off.0 > 5e-3, "the nominal lab records {nominal_off:?} off the truth");
 

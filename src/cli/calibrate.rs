@@ -32,7 +32,7 @@ use hitl_record::{reader, topics};
 use hitl_trajectories::lab::{BoardPlacement, CalibrationProvenance, LabConfig};
 use hitl_trajectories::preflight;
 use hitl_trajectories::timing::SetpointTable;
-use nalgebra::{Isometry3, Quaternion, Translation3, UnitQuaternion};
+use nalgebra::Isometry3;
 use std::io::IsTerminal;
 use std::ops::ControlFlow;
 use std::path::{Path, PathBuf};
@@ -617,17 +617,7 @@ fn read_views(
         }
         let det = hitl_calib::detect(board, img.width as usize, img.height as usize, &grey)
             .map_err(|e| bad(e.to_string()))?;
-        let p = &tf.base_flange;
-        let base_flange = Isometry3::from_parts(
-            Translation3::new(p.translation[0], p.translation[1], p.translation[2]),
-            UnitQuaternion::from_quaternion(Quaternion::new(
-                p.rotation[3],
-                p.rotation[0],
-                p.rotation[1],
-                p.rotation[2],
-            )),
-        );
-        out.push(View { base_flange, corners: det.corners });
+        out.push(View { base_flange: tf.base_flange, corners: det.corners });
     }
     Ok((out, k))
 }
