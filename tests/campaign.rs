@@ -154,6 +154,45 @@ fn unknown_keys_are_refused_naming_them() {
     assert!(!Path::new("/nonexistent/x").exists());
 }
 
+/// Every preset in campaigns/ loads and expands to the paper's study: a preset edited into an
+/// unknown key or a wrong matrix would otherwise only show when someone runs it for an hour.
+#[test]
+fn the_presets_load_with_their_case_counts() {
+    let expected = [
+        ("rq2-mesh.toml", 21),
+        ("rq2-mesh-ci.toml", 2),
+        ("rq3-range.toml", 24),
+        ("rq3-range-ci.toml", 2),
+        ("rq4-illumination.toml", 15),
+        ("rq4-illumination-ci.toml", 2),
+        ("sitl-table.toml", 24),
+    ];
+    let dir = Path::new(env!("CARGO_MANIFEST_DIR")).join("campaigns");
+    let mut found: Vec<String> = std::fs::read_dir(&dir)
+        .expect("campaigns/")
+        .filter_map(|e| e.ok())
+        .map(|e| e.file_name().to_string_lossy().into_owned())
+        .filter(|n| n.ends_with(".toml"))
+        .collect();
+    found.sort();
+    let mut listed: Vec<String> = expected.iter().map(|(n, _)| n.to_string()).collect();
+    listed.sort();
+    assert_eq!(found, listed, "a preset without an expected case count here");
+    for (name, cases) in expected {
+        let o = hitl(&["campaign", "list", dir.join(name).to_str().expect("utf-8")]);
+        assert_eq!(o.status.code(), Some(0), "{name}: {}", text(&o));
+        let out = String::from_utf8_lossy(&o.stdout);
+        assert!(
+            out.lines().next().is_some_and(|l| l.ends_with(&format!(": {cases} cases"))),
+            "{name}: {out}"
+        );
+        assert_eq!(out.lines().count(), cases + 1, "{name}: {out}");
+    }
+    // The illumination study plays where the Sun moves.
+    let rq4 = std::fs::read_to_string(dir.join("rq4-illumination.toml")).expect("rq4");
+    assert!(rq4.contains("scene_kind = \"orbit\""));
+}
+
 #[test]
 fn sbatch_script_plays_its_case_and_failures_are_recorded() {
     let d = tempfile::tempdir().expect("tempdir");
