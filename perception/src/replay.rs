@@ -7,7 +7,7 @@
 use crate::{PerceptionError, PerceptionFrame};
 use foxglove::messages as fg;
 use hitl_hal::Intrinsics;
-use hitl_record::reader::{decode_image, depth_metres, visit};
+use hitl_record::reader::{decode_image, decode_intrinsics, depth_metres, packed_rows, visit};
 use hitl_record::topics;
 use std::collections::BTreeMap;
 use std::ops::ControlFlow;
@@ -35,19 +35,6 @@ pub struct ReplaySummary {
 
 fn ts(t: Option<fg::Timestamp>, log_time: u64) -> u64 {
     t.map(|t| t.total_nanos()).unwrap_or(log_time)
-}
-
-/// Packed rows of `channels` bytes per pixel from an image with a row stride.
-fn packed(img: &fg::RawImage, channels: usize) -> Option<Vec<u8>> {
-    let (w, h, step) = (img.width as usize, img.height as usize, img.step as usize);
-    if step < w * channels || img.data.len() < step * h {
-        return None;
-    }
-    let mut out = Vec::with_capacity(w * h * channels);
-    for r in 0..h {
-        out.extend_from_slice(&img.data[r * step..r * step + w * channels]);
-    }
-    Some(out)
 }
 
 /// Calls `on_frame` for every capture that has depth and a calibration, in file order.
@@ -87,19 +74,9 @@ pub fn replay_frames(
         |m| {
             let topic = m.topic;
             if topic == topics::CALIBRATION {
-                match <fg::CameraCalibration as prost::Message>::decode(m.data) {
-                    Ok(c) if c.k.len() == 9 && c.k[0] > 0.0 && c.k[4] > 0.0 => {
-                        calib = Some(Intrinsics {
-                            width: c.width,
-                            height: c.height,
-                            fx: c.k[0],
-                            fy: c.k[4],
-                            cx: c.k[2],
-                            cy: c.k[5],
-                        });
-                    }
-                    Ok(_) => bad = Some("a /camera/calibration has no usable K matrix".into()),
-                    Err(e) => bad = Some(format!("undecodable /camera/calibration: {e}")),
+                match decode_intrinsics(m.data, m.log_time) {
+                    Ok((_, k)) => calib = Some(k),
+                    Err(e) => bad = Some(e.to_string()),
                 }
                 return if bad.is_some() {
                     ControlFlow::Break(())
@@ -120,8 +97,8 @@ pub fn replay_frames(
                 topics::DEPTH => {
                     entry.depth = depth_metres(&img).map(|d| (img.width, img.height, d))
                 }
-                topics::MASK => entry.mask = packed(&img, 1),
-                _ => entry.color = packed(&img, 3),
+                topics::MASK => entry.mask = packed_rows(&img, 1),
+                _ => entry.color = packed_rows(&img, 3),
             }
             while pending.len() > PENDING {
                 if let Some((t0, p)) = pending.pop_first() {

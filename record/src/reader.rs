@@ -9,7 +9,7 @@ use crate::msg::{
 };
 use crate::topics;
 use foxglove::messages as fg;
-use hitl_hal::{pose, Pose};
+use hitl_hal::{pose, Intrinsics, Pose};
 use mcap::records::Record;
 use mcap::sans_io::linear_reader::{LinearReadEvent, LinearReader, LinearReaderOptions};
 use serde::{Deserialize, Serialize};
@@ -224,9 +224,72 @@ pub fn decode_pose(data: &[u8], log_time: u64) -> Result<PoseStamped, String> {
     Ok(PoseStamped { capture_ns: ts_ns(m.timestamp).unwrap_or(log_time), pose })
 }
 
+/// Why a `/camera/calibration` message gives no intrinsics.
+#[derive(Debug)]
+pub enum CalibrationError {
+    /// Not a `foxglove.CameraCalibration`.
+    Undecodable(prost::DecodeError),
+    /// Decoded, but its K matrix is not 9 finite numbers with positive focal lengths, or its
+    /// image size is zero.
+    NoUsableK,
+}
+
+impl std::fmt::Display for CalibrationError {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        match self {
+            Self::Undecodable(e) => write!(f, "undecodable /camera/calibration: {e}"),
+            Self::NoUsableK => f.write_str("a /camera/calibration has no usable K matrix"),
+        }
+    }
+}
+
+/// Decode a `/camera/calibration` message into the camera's intrinsics and their time (the
+/// message's timestamp, else `log_time`): the inverse of what the recorder writes.
+pub fn decode_intrinsics(
+    data: &[u8],
+    log_time: u64,
+) -> Result<(u64, Intrinsics), CalibrationError> {
+    let c = <fg::CameraCalibration as prost::Message>::decode(data)
+        .map_err(CalibrationError::Undecodable)?;
+    let usable = c.k.len() == 9
+        && c.k.iter().all(|v| v.is_finite())
+        && c.k[0] > 0.0
+        && c.k[4] > 0.0
+        && c.width > 0
+        && c.height > 0;
+    if !usable {
+        return Err(CalibrationError::NoUsableK);
+    }
+    let k = Intrinsics {
+        width: c.width,
+        height: c.height,
+        fx: c.k[0],
+        fy: c.k[4],
+        cx: c.k[2],
+        cy: c.k[5],
+    };
+    Ok((ts_ns(c.timestamp).unwrap_or(log_time), k))
+}
+
 /// Decode a `/camera/*` image.
 pub fn decode_image(data: &[u8]) -> Result<fg::RawImage, prost::DecodeError> {
     <fg::RawImage as prost::Message>::decode(data)
+}
+
+/// The image's rows without their padding, `bpp` bytes per pixel (a `step` of 0 means rows
+/// without padding); `None` when the step is shorter than a row or the buffer than the image.
+pub fn packed_rows(img: &fg::RawImage, bpp: usize) -> Option<Vec<u8>> {
+    let (w, h) = (img.width as usize, img.height as usize);
+    let row = w.checked_mul(bpp)?;
+    let step = if img.step == 0 { row } else { img.step as usize };
+    if step < row || img.data.len() < step.checked_mul(h)? {
+        return None;
+    }
+    let mut out = Vec::with_capacity(row * h);
+    for r in 0..h {
+        out.extend_from_slice(&img.data[r * step..r * step + row]);
+    }
+    Some(out)
 }
 
 /// Depth in metres from a 32FC1 (metres) or 16UC1 (millimetres) image; `None` for other
@@ -332,6 +395,34 @@ fn decode_into(rec: &mut Recording, m: &RawMessage<'_>) -> Result<(), String> {
 mod tests {
     use super::*;
     use prost::Message;
+
+    #[test]
+    fn packed_rows_drop_the_padding_and_refuse_short_buffers() {
+        let img = |step: u32, data: Vec<u8>| fg::RawImage {
+            width: 2,
+            height: 2,
+            encoding: "mono8".into(),
+            step,
+            data: data.into(),
+            ..Default::default()
+        };
+        assert_eq!(packed_rows(&img(3, vec![1, 2, 9, 3, 4, 9]), 1), Some(vec![1, 2, 3, 4]));
+        assert_eq!(packed_rows(&img(0, vec![1, 2, 3, 4]), 1), Some(vec![1, 2, 3, 4]));
+        assert_eq!(packed_rows(&img(3, vec![1, 2, 9, 3, 4]), 1), None, "buffer short");
+        assert_eq!(packed_rows(&img(1, vec![1, 2, 3, 4]), 1), None, "step shorter than a row");
+    }
+
+    #[test]
+    fn intrinsics_are_what_the_recorder_wrote_and_bad_ones_are_named() {
+        let k = Intrinsics { width: 640, height: 400, fx: 500.0, fy: 501.0, cx: 320.5, cy: 199.5 };
+        let data = crate::sink::calibration(&k, 7, 1).encode_to_vec();
+        let (t, back) = decode_intrinsics(&data, 99).expect("decodes");
+        assert_eq!((t, back), (7, k));
+        let zero_fx = Intrinsics { fx: 0.0, ..k };
+        let data = crate::sink::calibration(&zero_fx, 7, 1).encode_to_vec();
+        assert!(matches!(decode_intrinsics(&data, 99), Err(CalibrationError::NoUsableK)));
+        assert!(matches!(decode_intrinsics(&[0xff; 3], 0), Err(CalibrationError::Undecodable(_))));
+    }
 
     fn pose_msg(orientation: Option<fg::Quaternion>) -> Vec<u8> {
         fg::PoseInFrame {

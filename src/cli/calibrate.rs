@@ -568,18 +568,7 @@ fn read_views(
                     images.push((t, img));
                 }
             } else if m.topic == topics::CALIBRATION && k.is_none() {
-                if let Ok(c) = <fg::CameraCalibration as prost::Message>::decode(m.data) {
-                    if c.k.len() == 9 {
-                        k = Some(Intrinsics {
-                            width: c.width,
-                            height: c.height,
-                            fx: c.k[0],
-                            fy: c.k[4],
-                            cx: c.k[2],
-                            cy: c.k[5],
-                        });
-                    }
-                }
+                k = reader::decode_intrinsics(m.data, m.log_time).ok().map(|(_, k)| k);
             }
             ControlFlow::Continue(())
         },
@@ -593,28 +582,21 @@ fn read_views(
         if tf.t_ns.abs_diff(t) > 20_000_000 {
             continue;
         }
-        let (w, h, step) = (img.width as usize, img.height as usize, img.step as usize);
         let bpp = match img.encoding.as_str() {
             "rgb8" => 3,
             "mono8" => 1,
             other => return Err(bad(format!("colour encoding {other} is not rgb8 or mono8"))),
         };
-        if step < w * bpp || img.data.len() < step * h {
-            return Err(bad(format!(
-                "a {w}x{h} {} image of {} bytes",
+        let pixels = reader::packed_rows(&img, bpp).ok_or_else(|| {
+            bad(format!(
+                "a {}x{} {} image of {} bytes",
+                img.width,
+                img.height,
                 img.encoding,
                 img.data.len()
-            )));
-        }
-        let mut grey = Vec::with_capacity(w * h);
-        for row in img.data.chunks(step).take(h) {
-            let row = &row[..w * bpp];
-            if bpp == 3 {
-                grey.extend(hitl_calib::detect::rgb_to_grey(row));
-            } else {
-                grey.extend_from_slice(row);
-            }
-        }
+            ))
+        })?;
+        let grey = if bpp == 3 { hitl_calib::detect::rgb_to_grey(&pixels) } else { pixels };
         let det = hitl_calib::detect(board, img.width as usize, img.height as usize, &grey)
             .map_err(|e| bad(e.to_string()))?;
         out.push(View { base_flange: tf.base_flange, corners: det.corners });

@@ -6,9 +6,8 @@
 //! last complete record); the pixels are read later, frame by frame, by [`crate::export::video`].
 
 use super::ExportError;
-use foxglove::messages as fg;
 use hitl_hal::Pose;
-use hitl_record::reader::{self, Recording};
+use hitl_record::reader::{self, CalibrationError, Recording};
 use hitl_record::topics;
 use std::collections::{BTreeMap, BTreeSet};
 use std::ops::ControlFlow;
@@ -157,13 +156,12 @@ fn index_images(path: &Path) -> Result<ImageIndex, ExportError> {
                     }
                 }
             } else if m.topic == topics::CALIBRATION {
-                match <fg::CameraCalibration as prost::Message>::decode(m.data) {
-                    Ok(c) if c.k.len() == 9 => {
-                        let t = c.timestamp.map(|t| t.total_nanos()).unwrap_or(m.log_time);
-                        ix.intrinsics.insert(t, [c.k[0], c.k[4], c.k[2], c.k[5]]);
+                match reader::decode_intrinsics(m.data, m.log_time) {
+                    Ok((t, k)) => {
+                        ix.intrinsics.insert(t, [k.fx, k.fy, k.cx, k.cy]);
                     }
-                    Ok(_) => {}
-                    Err(e) => {
+                    Err(CalibrationError::NoUsableK) => {}
+                    Err(CalibrationError::Undecodable(e)) => {
                         ix.undecodable = Some((m.topic.to_string(), e.to_string()));
                         return ControlFlow::Break(());
                     }

@@ -16,7 +16,7 @@
 
 use super::summary::{secs, t0};
 use super::ReportError;
-use crate::reader::{decode_image, depth_metres, visit, Recording};
+use crate::reader::{decode_image, decode_intrinsics, depth_metres, packed_rows, visit, Recording};
 use crate::topics;
 use foxglove::messages as fg;
 use hitl_hal::Intrinsics;
@@ -318,26 +318,14 @@ fn shrink_silhouette(s: &Silhouette, ow: u32, oh: u32) -> Silhouette {
     Silhouette { width: ow, height: oh, inside: small.iter().map(|&v| v >= 128).collect() }
 }
 
-/// Rows of `img` without padding, `bpp` bytes per pixel; `None` when the buffer is too short.
-fn packed(img: &fg::RawImage, bpp: usize) -> Option<Vec<u8>> {
-    let (w, h) = (img.width as usize, img.height as usize);
-    let step = if img.step == 0 { w * bpp } else { img.step as usize };
-    if step < w * bpp || img.data.len() < step.checked_mul(h)? {
-        return None;
-    }
-    let mut out = Vec::with_capacity(w * h * bpp);
-    for row in 0..h {
-        out.extend_from_slice(&img.data[row * step..row * step + w * bpp]);
-    }
-    Some(out)
-}
-
 /// rgb8 pixels of a colour image (rgb8, bgr8 or mono8).
 fn rgb_of(img: &fg::RawImage) -> Option<Vec<u8>> {
     match img.encoding.as_str() {
-        "rgb8" => packed(img, 3),
-        "bgr8" => Some(packed(img, 3)?.chunks_exact(3).flat_map(|p| [p[2], p[1], p[0]]).collect()),
-        "mono8" => Some(packed(img, 1)?.iter().flat_map(|&v| [v, v, v]).collect()),
+        "rgb8" => packed_rows(img, 3),
+        "bgr8" => {
+            Some(packed_rows(img, 3)?.chunks_exact(3).flat_map(|p| [p[2], p[1], p[0]]).collect())
+        }
+        "mono8" => Some(packed_rows(img, 1)?.iter().flat_map(|&v| [v, v, v]).collect()),
         _ => None,
     }
 }
@@ -414,19 +402,9 @@ pub fn write_contact_sheet(
         mcap,
         |m| {
             if m.topic == topics::CALIBRATION {
-                match <fg::CameraCalibration as prost::Message>::decode(m.data) {
-                    Ok(c) if c.k.len() == 9 && c.width > 0 && c.height > 0 => {
-                        let k = Intrinsics {
-                            width: c.width,
-                            height: c.height,
-                            fx: c.k[0],
-                            fy: c.k[4],
-                            cx: c.k[2],
-                            cy: c.k[5],
-                        };
-                        captures.push((m.log_time, k));
-                    }
-                    _ => bad_calibration += 1,
+                match decode_intrinsics(m.data, m.log_time) {
+                    Ok((_, k)) => captures.push((m.log_time, k)),
+                    Err(_) => bad_calibration += 1,
                 }
             }
             ControlFlow::Continue(())
@@ -516,7 +494,7 @@ pub fn write_contact_sheet(
             .unwrap_or_else(|| vec![0; fw as usize * fh as usize * 3]);
         let mask = mask
             .filter(|m| m.encoding == "mono8")
-            .and_then(|m| Silhouette::from_mono8(fw, fh, &packed(&m, 1)?));
+            .and_then(|m| Silhouette::from_mono8(fw, fh, &packed_rows(&m, 1)?));
         // The window shown: the whole frame, or (zoom) a crop around the target's mask.
         let window = opts
             .zoom
