@@ -1,6 +1,7 @@
 # hitl: two commands on a fresh Linux machine with the Rust toolchain, Python 3 and pip.
 #   make demo   set up, then run a stub campaign: play a preset trajectory, record it, report it
 #   make test   set up, then run every test (Rust, Python peers), fmt and clippy
+#   make firmware / firmware-check   the trigger box's firmware and box-sim (docs/trigger-box.md)
 SHELL := /bin/bash
 CARGO ?= cargo
 
@@ -55,3 +56,5 @@ bench: setup
 
 clean-deps:
 	rm -rf .deps .venv
+
+include firmware/firmware.mk
