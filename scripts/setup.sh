@@ -11,7 +11,10 @@
 #                libegl1, libegl-mesa0, libgl1-mesa-dri (the simulated camera renders with
 #                MuJoCo's OpenGL renderer on an offscreen EGL device: a GPU's, or Mesa's software
 #                one on a machine without), and ffmpeg (`hitl export lerobot` encodes the
-#                dataset's videos with its libx264 and libx265), when missing and we are root
+#                dataset's videos with its libx264 and libx265), and gcc-avr, avr-libc,
+#                binutils-avr, simavr, libsimavr-dev, libsimavrparts1 (`make firmware`: the
+#                trigger box's firmware and box-sim, docs/trigger-box.md), when missing and we
+#                are root
 set -euo pipefail
 cd "$(dirname "$0")/.."
 ROOT=$(pwd)
@@ -27,7 +30,8 @@ say() { printf 'setup: %s\n' "$*"; }
 
 # --- Debian packages the build needs -------------------------------------------------------
 need_pkgs=()
-for p in pkg-config libudev-dev rt-tests libegl1 libegl-mesa0 libgl1-mesa-dri ffmpeg; do
+for p in pkg-config libudev-dev rt-tests libegl1 libegl-mesa0 libgl1-mesa-dri ffmpeg \
+         gcc-avr avr-libc binutils-avr simavr libsimavr-dev libsimavrparts1; do
   dpkg-query -W -f='${Status}' "$p" 2>/dev/null | grep -q 'install ok installed' || need_pkgs+=("$p")
 done
 if [ ${#need_pkgs[@]} -gt 0 ]; then
