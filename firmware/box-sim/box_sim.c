@@ -25,6 +25,8 @@
  *     light            the PWM duty in 1/256 (0 off .. 256 full on)
  *     estop, door      the input contact: 1 open (pressed / door open), 0 closed
  *     rx               a host byte has ended; level is the byte's value (10 = '\n')
+ *     tx               the firmware has started sending a byte (wrote UDR0); level its value;
+ *                      it ends one frame (93.5 us) later
  *     reset            the chip was reset (level 1): watchdog
  * - --hang-at S: at S the chip jumps into an endless loop with interrupts off (avr-libc's
  *   `__stop_program`), as a firmware hang would; the watchdog has to reset it.
@@ -287,6 +289,7 @@ static void pump_start(void) {
 static void on_uart_out(struct avr_irq_t *irq, uint32_t value, void *param) {
     (void)irq;
     (void)param;
+    trace_row(avr->cycle, "tx", (int)(value & 0xFF));
     if (txq_len < sizeof txq)
         txq[txq_len++] = (uint8_t)value;
     else

@@ -137,6 +137,20 @@ def host_lines(rows):
     return out
 
 
+def box_lines(rows, frame_us):
+    """The box's lines as sent: (text, end time of its '\\n' in us)."""
+    out, cur = [], bytearray()
+    for t, pin, level in rows:
+        if pin != "tx":
+            continue
+        if level == 10:
+            out.append((cur.decode("ascii", "replace"), t + frame_us))
+            cur = bytearray()
+        else:
+            cur.append(level)
+    return out
+
+
 def edges(rows, pin):
     return [(t, level) for t, p, level in rows if p == pin]
 
@@ -315,6 +329,25 @@ def main():
     strobe = edges(rows, "strobe")
     light = edges(rows, "light")
 
+    # Answer time: end of a command line -> end of its answer line on the wire.
+    frame_us = 11 * 136 / 16  # simavr's frame: 11 bit times of 136 cycles
+    rx_rows = [t for t, p, _ in rows if p == "rx"]
+    frame_ok = all(b - a >= frame_us - 0.01 for a, b in zip(rx_rows, rx_rows[1:]))
+    cmd_end = {}
+    for text, end in lines:
+        f = text.split()
+        if len(f) >= 2 and f[1].isdigit() and f[0] in "PFLSV":
+            cmd_end.setdefault(int(f[1]), end)
+    answer_ms = []
+    for text, end in box_lines(rows, frame_us):
+        f = text.split()
+        if f and f[0] in "AEV" and len(f) >= 2 and int(f[1]) in cmd_end:
+            answer_ms.append((end - cmd_end[int(f[1])]) / 1000)
+    check(frame_ok and answer_ms and max(answer_ms) <= 10,
+          "answers: command's last byte -> answer's last byte p50 %.3f, max %.3f ms over %d "
+          "(the protocol's bound: 10 ms)" % (percentile(answer_ms, 50), max(answer_ms),
+                                             len(answer_ms)))
+
     # Latency and width of the camera fires.
     latency, width, offset = [], [], []
     fire_lines = {int(t.split()[1]): end for t, end in lines if t.startswith("F ")}
@@ -415,6 +448,8 @@ def main():
     check(light_at_hang == 128 and light_after[:1] == [0],
           f"light {light_at_hang}/256 when it hung, {light_after[:1]} from the reset on")
 
+    stats["answer_ms"] = {"p50": percentile(answer_ms, 50), "p99": percentile(answer_ms, 99),
+                          "max": max(answer_ms), "count": len(answer_ms)}
     summary = {"stats": stats, "input_report_latency_ms": {
         "estop_pressed": lat_e and lat_e / 1000, "estop_released": lat_r and lat_r / 1000,
         "door_opened": lat_d and lat_d / 1000}, "largest_I_gap_ms": max(gaps) / 1000,
