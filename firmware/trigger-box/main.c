@@ -463,9 +463,10 @@ int main(void) {
             tx_text("E 0 3\n");
         }
 
-        /* Host silence: fail-safe once, and say so. */
+        /* Host silence: fail-safe once, and say so. The clock is read here, with interrupts
+         * off: a command taken since now_ms was read may be stamped later than now_ms. */
         cli();
-        if (host_alive && now_ms - host_last_ms >= HOST_SILENCE_MS) {
+        if (host_alive && ms_clock - host_last_ms >= HOST_SILENCE_MS) {
             host_alive = 0;
             outputs_safe();
             silent_notice = 1;
