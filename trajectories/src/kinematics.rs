@@ -91,6 +91,7 @@ pub const CAPSULE_NAMES: [&str; 8] =
 /// Where the camera body sits in the camera frame (OpenCV axes: z forward): a capsule from
 /// `back_m` behind the optical centre to the optical centre, across the body's width.
 #[derive(Debug, Clone, Copy, PartialEq, serde::Serialize, serde::Deserialize)]
+#[serde(default, deny_unknown_fields)]
 pub struct CameraBody {
     pub half_width_m: f64,
     pub depth_m: f64,

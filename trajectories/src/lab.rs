@@ -296,6 +296,75 @@ impl Default for Interlocks {
     }
 }
 
+/// Longest report watchdog or reply stall a lab configuration may set, milliseconds.
+pub const MAX_WATCHDOG_MS: f64 = 2000.0;
+
+/// The documented range of one lab-configuration number.
+#[derive(Debug, Clone, Copy)]
+enum Range {
+    /// `> 0`.
+    Positive,
+    /// `>= 0`.
+    NonNegative,
+    /// `(0, max]`, with the reason for the maximum.
+    UpTo(f64, &'static str),
+    /// `[lo, hi]`.
+    Within(f64, f64),
+    /// An angle in degrees, `[-360, 360]`.
+    Angle,
+}
+
+impl Range {
+    fn holds(self, v: f64) -> bool {
+        match self {
+            Range::Positive => v > 0.0,
+            Range::NonNegative => v >= 0.0,
+            Range::UpTo(max, _) => v > 0.0 && v <= max,
+            Range::Within(lo, hi) => (lo..=hi).contains(&v),
+            Range::Angle => (-360.0..=360.0).contains(&v),
+        }
+    }
+
+    fn describe(self) -> String {
+        match self {
+            Range::Positive => "must be positive".into(),
+            Range::NonNegative => "must be zero or positive".into(),
+            Range::UpTo(max, why) => format!("must be in (0, {max:.4}] ({why})"),
+            Range::Within(lo, hi) => format!("must be in [{lo}, {hi}]"),
+            Range::Angle => "must be an angle in [-360, 360] degrees".into(),
+        }
+    }
+}
+
+/// A key (or array of keys) and the range its values must lie in.
+struct Rule<'a> {
+    key: &'static str,
+    values: std::borrow::Cow<'a, [f64]>,
+    array: bool,
+    range: Range,
+}
+
+impl<'a> Rule<'a> {
+    fn one(key: &'static str, v: f64, range: Range) -> Self {
+        Rule { key, values: std::borrow::Cow::Owned(vec![v]), array: false, range }
+    }
+
+    fn each(key: &'static str, v: &'a [f64], range: Range) -> Self {
+        Rule { key, values: std::borrow::Cow::Borrowed(v), array: true, range }
+    }
+
+    fn check(&self) -> Result<(), ConfigError> {
+        match self.values.iter().enumerate().find(|(_, v)| !self.range.holds(**v)) {
+            None => Ok(()),
+            Some((i, v)) => {
+                let key =
+                    if self.array { format!("{}[{i}]", self.key) } else { self.key.to_string() };
+                Err(ConfigError::Invalid(format!("{key} = {v} {}", self.range.describe())))
+            }
+        }
+    }
+}
+
 fn rpy(deg: &[f64; 3]) -> UnitQuaternion<f64> {
     UnitQuaternion::from_euler_angles(deg[0].to_radians(), deg[1].to_radians(), deg[2].to_radians())
 }
@@ -309,6 +378,7 @@ impl LabConfig {
             ConfigError::Parse { message, .. } => {
                 ConfigError::Parse { path: path.display().to_string(), message }
             }
+            ConfigError::Invalid(m) => ConfigError::Invalid(format!("{}: {m}", path.display())),
             other => other,
         })
     }
@@ -326,97 +396,131 @@ impl LabConfig {
         toml::to_string_pretty(self).unwrap_or_default()
     }
 
-    /// Refuse values that make no physical sense.
+    /// Refuse values that make no physical sense: every number finite and in the range
+    /// docs/lab-config.md gives for its key, the error naming the key. One pass, run by every
+    /// loader (`check`, `plan`, `run`, `calibrate`, `stub`, their `--stub-config`) before any
+    /// device opens.
     pub fn validate(&self) -> Result<(), ConfigError> {
-        let bad = |m: String| Err(ConfigError::Invalid(m));
-        let finite = |name: &str, v: &[f64]| -> Result<(), ConfigError> {
-            if v.iter().all(|x| x.is_finite()) {
-                Ok(())
-            } else {
-                Err(ConfigError::Invalid(format!("{name} must be finite numbers")))
-            }
-        };
-        finite("enclosure.size_m", &self.enclosure.size_m)?;
-        finite("arm.base_in_lab_m", &self.arm.base_in_lab_m)?;
-        finite("target.position_base_m", &self.target.position_base_m)?;
-        finite("light.position_lab_m", &self.light.position_lab_m)?;
-        finite("camera.translation_m", &self.camera.translation_m)?;
-        if self.enclosure.size_m.iter().any(|s| *s <= 0.0) {
-            return bad("enclosure.size_m must be positive".into());
+        if let Some((key, v)) = self.first_non_finite()? {
+            return Err(ConfigError::Invalid(format!("{key} = {v} must be a finite number")));
+        }
+        for rule in self.range_rules() {
+            rule.check()?;
         }
         let lo = Point3::origin();
         let hi = Point3::from(Vector3::from(self.enclosure.size_m));
         let base = Point3::from(Vector3::from(self.arm.base_in_lab_m));
         if (0..3).any(|a| base[a] < lo[a] || base[a] > hi[a]) {
-            return bad(format!(
+            return Err(ConfigError::Invalid(format!(
                 "arm.base_in_lab_m {:?} is outside the enclosure",
                 self.arm.base_in_lab_m
-            ));
-        }
-        for (j, v) in self.limits.velocity_rad_s.iter().enumerate() {
-            if !(*v > 0.0 && *v <= MAX_JOINT_SPEED) {
-                return bad(format!(
-                    "limits.velocity_rad_s[{j}] = {v} must be in (0, {MAX_JOINT_SPEED:.4}] (the xArm7's 180 deg/s)"
-                ));
-            }
-        }
-        for (name, vals) in [
-            ("limits.acceleration_rad_s2", &self.limits.acceleration_rad_s2),
-            ("limits.jerk_rad_s3", &self.limits.jerk_rad_s3),
-        ] {
-            if let Some((j, v)) =
-                vals.iter().enumerate().find(|(_, v)| !(**v > 0.0 && v.is_finite()))
-            {
-                return bad(format!("{name}[{j}] = {v} must be positive"));
-            }
-        }
-        let positive = [
-            ("limits.max_step_rad", self.limits.max_step_rad),
-            ("limits.approach_velocity_rad_s", self.limits.approach_velocity_rad_s),
-            ("limits.approach_acceleration_rad_s2", self.limits.approach_acceleration_rad_s2),
-            ("limits.approach_jerk_rad_s3", self.limits.approach_jerk_rad_s3),
-            ("interlocks.max_deviation_rad", self.interlocks.max_deviation_rad),
-            ("target.real_size_m", self.target.real_size_m),
-        ];
-        if let Some((name, v)) = positive.iter().find(|(_, v)| !(*v > 0.0 && v.is_finite())) {
-            return bad(format!("{name} = {v} must be positive"));
-        }
-        let non_negative = [
-            ("margins.joint_limit_rad", self.margins.joint_limit_rad),
-            ("margins.wall_m", self.margins.wall_m),
-            ("margins.keepout_m", self.margins.keepout_m),
-            ("target.keepout_radius_m", self.target.keepout_radius_m),
-            ("target.tripod_radius_m", self.target.tripod_radius_m),
-            ("light.keepout_radius_m", self.light.keepout_radius_m),
-            ("camera.min_target_distance_m", self.camera.min_target_distance_m),
-        ];
-        if let Some((name, v)) = non_negative.iter().find(|(_, v)| !(*v >= 0.0 && v.is_finite())) {
-            return bad(format!("{name} = {v} must be zero or positive"));
-        }
-        if !(self.limits.tcp_speed_m_s > 0.0
-            && self.limits.tcp_speed_m_s <= SERVO_J_TCP_SPEED_LIMIT)
-        {
-            return bad(format!(
-                "limits.tcp_speed_m_s = {} must be in (0, {SERVO_J_TCP_SPEED_LIMIT}] (the control \
-                 box's servo_j TCP speed limit, error 60)",
-                self.limits.tcp_speed_m_s
-            ));
-        }
-        if self.limits.approach_velocity_rad_s > MAX_JOINT_SPEED {
-            return bad("limits.approach_velocity_rad_s exceeds the xArm7's 180 deg/s".into());
-        }
-        if self.interlocks.report_timeout_ms == 0 {
-            return bad("interlocks.report_timeout_ms must be positive".into());
-        }
-        if self.interlocks.reply_stall_ms == 0 {
-            return bad("interlocks.reply_stall_ms must be positive".into());
-        }
-        if let Some(m) = self.target.model_size_m {
-            if !(m > 0.0 && m.is_finite()) {
-                return bad(format!("target.model_size_m = {m} must be positive"));
-            }
+            )));
         }
         Ok(())
+    }
+
+    /// The first number anywhere in the configuration that is NaN or infinite, with its key
+    /// path (`target.rpy_deg[0]`). Walks the serialised form, so a key added later is covered.
+    fn first_non_finite(&self) -> Result<Option<(String, f64)>, ConfigError> {
+        fn walk(v: &toml::Value, key: &str) -> Option<(String, f64)> {
+            match v {
+                toml::Value::Float(f) if !f.is_finite() => Some((key.to_string(), *f)),
+                toml::Value::Array(a) => {
+                    a.iter().enumerate().find_map(|(i, x)| walk(x, &format!("{key}[{i}]")))
+                }
+                toml::Value::Table(t) => t.iter().find_map(|(k, x)| {
+                    walk(x, &if key.is_empty() { k.clone() } else { format!("{key}.{k}") })
+                }),
+                _ => None,
+            }
+        }
+        let v = toml::Value::try_from(self)
+            .map_err(|e| ConfigError::Invalid(format!("cannot be read back as TOML: {e}")))?;
+        Ok(walk(&v, ""))
+    }
+
+    /// The documented range of every number (docs/lab-config.md).
+    fn range_rules(&self) -> Vec<Rule<'_>> {
+        use Range::*;
+        let l = &self.limits;
+        let mut rules = vec![
+            Rule::each("enclosure.size_m", &self.enclosure.size_m, Positive),
+            Rule::one("arm.base_yaw_deg", self.arm.base_yaw_deg, Angle),
+            Rule::each("target.rpy_deg", &self.target.rpy_deg, Angle),
+            Rule::one("target.keepout_radius_m", self.target.keepout_radius_m, NonNegative),
+            Rule::one("target.tripod_radius_m", self.target.tripod_radius_m, NonNegative),
+            Rule::one("target.real_size_m", self.target.real_size_m, Positive),
+            Rule::one("light.keepout_radius_m", self.light.keepout_radius_m, NonNegative),
+            Rule::each("camera.rpy_deg", &self.camera.rpy_deg, Angle),
+            Rule::one("camera.body.half_width_m", self.camera.body.half_width_m, NonNegative),
+            Rule::one("camera.body.depth_m", self.camera.body.depth_m, NonNegative),
+            Rule::one("camera.body.radius_m", self.camera.body.radius_m, Positive),
+            Rule::one(
+                "camera.min_target_distance_m",
+                self.camera.min_target_distance_m,
+                NonNegative,
+            ),
+            Rule::one("margins.joint_limit_rad", self.margins.joint_limit_rad, Within(0.0, 0.5)),
+            Rule::one("margins.wall_m", self.margins.wall_m, NonNegative),
+            Rule::one("margins.keepout_m", self.margins.keepout_m, NonNegative),
+            Rule::each(
+                "limits.velocity_rad_s",
+                &l.velocity_rad_s,
+                UpTo(MAX_JOINT_SPEED, "the xArm7's 180 deg/s"),
+            ),
+            Rule::each("limits.acceleration_rad_s2", &l.acceleration_rad_s2, Positive),
+            Rule::each("limits.jerk_rad_s3", &l.jerk_rad_s3, Positive),
+            Rule::one("limits.max_step_rad", l.max_step_rad, Positive),
+            Rule::one(
+                "limits.tcp_speed_m_s",
+                l.tcp_speed_m_s,
+                UpTo(
+                    SERVO_J_TCP_SPEED_LIMIT,
+                    "the control box's servo_j TCP speed limit, error 60",
+                ),
+            ),
+            Rule::one(
+                "limits.approach_velocity_rad_s",
+                l.approach_velocity_rad_s,
+                UpTo(MAX_JOINT_SPEED, "the xArm7's 180 deg/s"),
+            ),
+            Rule::one(
+                "limits.approach_acceleration_rad_s2",
+                l.approach_acceleration_rad_s2,
+                Positive,
+            ),
+            Rule::one("limits.approach_jerk_rad_s3", l.approach_jerk_rad_s3, Positive),
+            Rule::one(
+                "interlocks.report_timeout_ms",
+                self.interlocks.report_timeout_ms as f64,
+                UpTo(MAX_WATCHDOG_MS, "a watchdog slower than that watches nothing"),
+            ),
+            Rule::one("interlocks.max_deviation_rad", self.interlocks.max_deviation_rad, Positive),
+            Rule::one(
+                "interlocks.reply_stall_ms",
+                self.interlocks.reply_stall_ms as f64,
+                UpTo(MAX_WATCHDOG_MS, "a stall that long is a fault"),
+            ),
+        ];
+        if let Some(m) = self.target.model_size_m {
+            rules.push(Rule::one("target.model_size_m", m, Positive));
+        }
+        if let Some(b) = &self.board {
+            rules.push(Rule::one("board.rows", b.rows as f64, Within(1.0, 64.0)));
+            rules.push(Rule::one("board.cols", b.cols as f64, Within(1.0, 64.0)));
+            rules.push(Rule::one("board.tag_size_m", b.tag_size_m, Positive));
+            rules.push(Rule::one("board.tag_spacing_m", b.tag_spacing_m, NonNegative));
+            rules.push(Rule::each("board.rpy_deg", &b.rpy_deg, Angle));
+        }
+        if let Some(c) = &self.calibration {
+            rules.push(Rule::one("calibration.rms_px", c.rms_px, NonNegative));
+            rules.push(Rule::each("calibration.view_rms_px", &c.view_rms_px, NonNegative));
+            rules.push(Rule::one("calibration.camera_sigma_mm", c.camera_sigma_mm, NonNegative));
+            rules.push(Rule::one("calibration.camera_sigma_deg", c.camera_sigma_deg, NonNegative));
+            rules.push(Rule::one("calibration.target_sigma_mm", c.target_sigma_mm, NonNegative));
+            rules.push(Rule::one("calibration.target_sigma_deg", c.target_sigma_deg, NonNegative));
+        }
+        rules
     }
 
     /// The arm base's pose in the lab frame.
@@ -583,6 +687,45 @@ mod tests {
         assert!(e.to_string().contains("tcp_speed_m_s"), "{e}");
         let e = LabConfig::from_toml("[arm]\njoint_table = \"xarm7\"\n").expect_err("refused");
         assert!(e.to_string().contains("xarm7-current"), "{e}");
+    }
+
+    #[test]
+    fn every_number_must_be_finite_and_named_by_its_key() {
+        for (text, key) in [
+            ("[target]\nrpy_deg = [nan, 0, 0]\n", "target.rpy_deg[0] = NaN"),
+            ("[camera]\nrpy_deg = [0, inf, 0]\n", "camera.rpy_deg[1] = inf"),
+            ("[arm]\nbase_yaw_deg = -inf\n", "arm.base_yaw_deg = -inf"),
+            ("[camera.body]\nradius_m = nan\n", "camera.body.radius_m = NaN"),
+            ("[target]\nmodel_size_m = inf\n", "target.model_size_m = inf"),
+            ("[board]\nposition_target_m = [0, 0, nan]\n", "board.position_target_m[2] = NaN"),
+            ("[calibration]\nview_rms_px = [0.1, nan]\n", "calibration.view_rms_px[1] = NaN"),
+            ("[interlocks]\nmax_deviation_rad = nan\n", "interlocks.max_deviation_rad = NaN"),
+        ] {
+            let e = LabConfig::from_toml(text).expect_err(text).to_string();
+            assert!(e.contains(key) && e.contains("finite"), "{text}: {e}");
+        }
+    }
+
+    #[test]
+    fn every_number_must_be_in_its_documented_range() {
+        for (text, key) in [
+            ("[target]\nrpy_deg = [0, 400, 0]\n", "target.rpy_deg[1] = 400 must be an angle"),
+            ("[camera.body]\nradius_m = 0\n", "camera.body.radius_m = 0 must be positive"),
+            ("[margins]\njoint_limit_rad = 2\n", "margins.joint_limit_rad = 2 must be in [0, 0.5]"),
+            ("[interlocks]\nreport_timeout_ms = 0\n", "interlocks.report_timeout_ms = 0"),
+            ("[interlocks]\nreply_stall_ms = 99999\n", "interlocks.reply_stall_ms = 99999"),
+            ("[board]\nrows = 0\n", "board.rows = 0"),
+            ("[board]\ntag_size_m = -0.03\n", "board.tag_size_m = -0.03 must be positive"),
+            ("[enclosure]\nsize_m = [2, 0, 1]\n", "enclosure.size_m[1] = 0 must be positive"),
+        ] {
+            let e = LabConfig::from_toml(text).expect_err(text).to_string();
+            assert!(e.contains(key), "{text}: {e}");
+        }
+        // The edges of the ranges are accepted.
+        LabConfig::from_toml(
+            "[target]\nrpy_deg = [-360, 360, 0]\n[interlocks]\nreply_stall_ms = 2000\n",
+        )
+        .expect("edges");
     }
 
     #[test]
