@@ -138,14 +138,16 @@ def host_lines(rows):
 
 
 def box_lines(rows, frame_us):
-    """The box's lines as sent: (text, end time of its '\\n' in us)."""
-    out, cur = [], bytearray()
+    """The box's lines as sent: (text, start of its first byte, end of its '\\n'), in us."""
+    out, cur, start = [], bytearray(), None
     for t, pin, level in rows:
         if pin != "tx":
             continue
+        if start is None:
+            start = t
         if level == 10:
-            out.append((cur.decode("ascii", "replace"), t + frame_us))
-            cur = bytearray()
+            out.append((cur.decode("ascii", "replace"), start, t + frame_us))
+            cur, start = bytearray(), None
         else:
             cur.append(level)
     return out
@@ -339,7 +341,8 @@ def main():
         if len(f) >= 2 and f[1].isdigit() and f[0] in "PFLSV":
             cmd_end.setdefault(int(f[1]), end)
     answer_ms = []
-    for text, end in box_lines(rows, frame_us):
+    sent = box_lines(rows, frame_us)
+    for text, _, end in sent:
         f = text.split()
         if f and f[0] in "AEV" and len(f) >= 2 and int(f[1]) in cmd_end:
             answer_ms.append((end - cmd_end[int(f[1])]) / 1000)
@@ -378,7 +381,7 @@ def main():
         check(stats["ack_stamp_minus_edge_spread_us"] <= 2,
               "A timestamps track the edges: (edge - device_us) spread %.4f us (<= 2)"
               % stats["ack_stamp_minus_edge_spread_us"])
-        off = offset[0]  # simulated us = device us + off (within the spread)
+        off = sorted(offset)[len(offset) // 2]  # simulated us = device us + off (within the spread)
     cam_pulses = sum(1 for _, lv in cam if lv == 1)
     check(cam_pulses == args.fires + 2, f"camera pulses in the trace: {cam_pulses} "
           f"({args.fires} fires + F mask 3 + F mask 1 during the flash)")
@@ -401,6 +404,16 @@ def main():
     check(fall_long is not None and abs((fall_long - rise_long) - 300000) <= 1,
           "S 500 300000: strobe high %.4f us (held past 9 timer periods)"
           % ((fall_long - rise_long) if fall_long else -1))
+
+    # The box's clock keeps time: an I line leaves the UART (simulated time) a little after its
+    # device_us (formatting, and the answers queued ahead of it), never a timer period off.
+    reset_at = [t for t, p, _ in rows if p == "reset"]
+    i_off = [start - int(text.split()[1]) for text, start, _ in sent
+             if text.startswith("I ") and (not reset_at or start < reset_at[0])]
+    check(max(i_off) - min(i_off) < 10_000,
+          "the box's clock against simulated time, over %d I lines: %.3f .. %.3f ms "
+          "(a lost timer overflow would be 32.768 ms)" % (len(i_off), min(i_off) / 1000,
+                                                        max(i_off) / 1000))
 
     # Inputs: report period, debounce, report latency (before the watchdog reset).
     inputs = [(t, text) for t, text in box.lines[:hang_from_line] if text.startswith("I ")]

@@ -119,19 +119,19 @@ static void strobe_off_now(void) {
 static uint8_t fire(uint8_t mask, uint16_t strobe_permille, uint64_t strobe_ticks, uint64_t *at) {
     if (((mask & 1) && cam_state != LINE_IDLE) || ((mask & 2) && strobe_state != LINE_IDLE))
         return ERR_BUSY;
-    uint8_t clear = 0, enable = 0, com = 0;
+    uint8_t enable = 0, com = 0;
     if (mask & 1) {
-        clear |= _BV(OCF1A);
         enable |= _BV(OCIE1A);
         com |= COM1A_MASK; /* set on compare match */
     }
     if (mask & 2) {
-        clear |= _BV(OCF1B);
         enable |= _BV(OCIE1B);
         com |= COM1B_MASK;
         light_output(strobe_permille); /* PWM takes it at its next period (<= 16 us) */
     }
-    TIFR1 = clear; /* stale matches of the old compare values */
+    /* A flag left by a match of the old compare value is not cleared here (simavr 1.6 clears
+     * every Timer1 flag on any TIFR1 write, the overflow's too, and the clock would lose a
+     * period): the compare interrupts ignore a match whose time has not come (reached()). */
     uint16_t t = TCNT1;
     uint16_t edge = t + FIRE_LEAD_TICKS;
     if (mask & 1)
@@ -161,9 +161,15 @@ static uint8_t fire(uint8_t mask, uint16_t strobe_permille, uint64_t strobe_tick
     return 0;
 }
 
+/* Whether the timer has reached `ocr` (within half a period): a compare interrupt for a
+ * value not yet reached comes from a flag an earlier compare value left, and is ignored. */
+static uint8_t reached(uint16_t ocr) { return (uint16_t)(TCNT1 - ocr) < 0x8000; }
+
 /* Camera: the rising edge happened (set on match): the falling one CAM_TICKS later, by the
  * same compare unit in clear mode. Then the fall happened: disconnect. */
 ISR(TIMER1_COMPA_vect) {
+    if (!reached(OCR1A))
+        return;
     if (cam_state == LINE_RISE) {
         /* Clear mode first, then the new compare value (simavr applies the old mode's
          * "opposite at overflow" action when OCR1x is written; on the chip either order works). */
@@ -181,6 +187,8 @@ ISR(TIMER1_COMPA_vect) {
  * when it is less than one timer period away; held high through the port bit, waking 32768
  * ticks before the end, when it is further; waited for here when it is a few microseconds away. */
 ISR(TIMER1_COMPB_vect) {
+    if (!reached(OCR1B))
+        return;
     if (strobe_state == LINE_HIGH) { /* the compare unit has just cleared the line */
         TCCR1A &= (uint8_t)~COM1B_MASK;
         TIMSK1 &= (uint8_t)~_BV(OCIE1B);
