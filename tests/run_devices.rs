@@ -101,6 +101,14 @@ fn run_with_peer<T: Send + 'static>(
     light: &str,
     peer: impl FnOnce(Arc<AtomicBool>) -> T + Send + 'static,
 ) -> (Run, T) {
+    run_with_devices(&["--light", light], peer)
+}
+
+/// Plays the test trajectory with these device flags (no camera) while `peer` runs.
+fn run_with_devices<T: Send + 'static>(
+    devices: &[&str],
+    peer: impl FnOnce(Arc<AtomicBool>) -> T + Send + 'static,
+) -> (Run, T) {
     let dir = tempfile::tempdir().expect("tempdir");
     let traj = trajectory(dir.path());
     let mcap = dir.path().join("run.mcap");
@@ -110,7 +118,9 @@ fn run_with_peer<T: Send + 'static>(
     let out = Command::new(env!("CARGO_BIN_EXE_hitl"))
         .args(["run", traj.to_str().expect("utf-8"), "--record"])
         .arg(&mcap)
-        .args(["--camera", "none", "--light", light, "--plain", "--config", SHARED_VM_LAB])
+        .args(["--camera", "none"])
+        .args(devices)
+        .args(["--plain", "--config", SHARED_VM_LAB])
         .stdin(Stdio::null())
         .output()
         .expect("run hitl");
@@ -254,8 +264,19 @@ struct BoxLog {
     fire_us: Vec<u64>,
 }
 
-fn box_peer(mut peer: PtyPeer, then: Then, done: Arc<AtomicBool>) -> BoxLog {
+fn box_peer(peer: PtyPeer, then: Then, done: Arc<AtomicBool>) -> BoxLog {
+    box_peer_with(peer, then, done, |log, _| log.levels.contains(&600))
+}
+
+/// The box peer, acting `then` once `act(log, time since the first fire)` holds.
+fn box_peer_with(
+    mut peer: PtyPeer,
+    then: Then,
+    done: Arc<AtomicBool>,
+    act: impl Fn(&BoxLog, Duration) -> bool,
+) -> BoxLog {
     let start = Instant::now();
+    let mut first_fire: Option<Instant> = None;
     let us = || start.elapsed().as_micros() as u64;
     let mut log = BoxLog::default();
     let (mut estop, mut door, mut silent, mut acted) = (false, false, false, false);
@@ -279,10 +300,12 @@ fn box_peer(mut peer: PtyPeer, then: Then, done: Arc<AtomicBool>) -> BoxLog {
             let at = us();
             if f[0] == "F" {
                 log.fire_us.push(at);
+                first_fire.get_or_insert_with(Instant::now);
             }
             peer.write(format!("A {} {at}\n", f[1]).as_bytes());
         }
-        if !acted && log.levels.contains(&600) {
+        let since_first_fire = first_fire.map_or(Duration::ZERO, |t| t.elapsed());
+        if !acted && act(&log, since_first_fire) {
             acted = true;
             match then {
                 Then::Nothing => {}
@@ -365,6 +388,53 @@ fn an_error_line_from_the_trigger_box_is_a_device_fault_with_exit_5() {
     assert!(run.stop_setpoints() > 0, "a controlled stop: {}", run.text());
 }
 
+/// `--trigger trigger:BOX --light dmx:WIDGET`: a lab whose Sun is a DMX fixture still fires its
+/// camera from the box and reads the box's inputs; the box's light output is never driven.
+fn box_beside_dmx(then: Then) -> (Run, BoxLog, Vec<(Instant, u8)>) {
+    let box_pty = PtyPeer::new();
+    let widget = PtyPeer::new();
+    let trigger = format!("trigger:{}", box_pty.path);
+    let light = format!("dmx:{}", widget.path);
+    let (run, (log, frames)) =
+        run_with_devices(&["--trigger", &trigger, "--light", &light], move |done| {
+            let widget_done = Arc::clone(&done);
+            let dmx = std::thread::spawn(move || dmx_peer(widget, None, widget_done));
+            // The box acts on its own clock here: it never sees a level, so it acts 1.2 s in.
+            let log = box_peer_timed(box_pty, then, done);
+            (log, dmx.join().expect("the widget thread"))
+        });
+    (run, log, frames)
+}
+
+/// [`box_peer`] for a box that is not the light: it acts `then` 1.2 s after the first fire.
+fn box_peer_timed(peer: PtyPeer, then: Then, done: Arc<AtomicBool>) -> BoxLog {
+    box_peer_with(peer, then, done, |log, since_first_fire| {
+        !log.fires.is_empty() && since_first_fire >= Duration::from_millis(1200)
+    })
+}
+
+#[test]
+fn a_trigger_box_beside_a_dmx_light_fires_the_camera_while_the_widget_follows_the_schedule() {
+    let _one = ONE_AT_A_TIME.lock().unwrap_or_else(|e| e.into_inner());
+    let (run, log, frames) = box_beside_dmx(Then::Nothing);
+    assert_eq!(run.code(), 0, "{}", run.text());
+    let fired: Vec<u64> = log.fires.iter().map(|f| f.0).collect();
+    assert_eq!(fired, run.capture_ticks(), "F lines at the capture ticks");
+    assert!(log.levels.is_empty(), "the box's light is not driven: {:?}", log.levels);
+    assert_eq!(changes(&frames), vec![0, 51, 153, 255], "{}", run.text());
+    assert_eq!(run.rec.trigger_fired.len(), fired.len(), "/trigger/fired");
+    let meta = &run.rec.metadata["run"]["config"];
+    assert!(meta.contains("\"trigger\":\"trigger:"), "the run records its trigger: {meta}");
+}
+
+#[test]
+fn the_door_on_a_trigger_box_beside_a_dmx_light_stops_the_run_with_exit_4() {
+    let _one = ONE_AT_A_TIME.lock().unwrap_or_else(|e| e.into_inner());
+    let (run, _, _) = box_beside_dmx(Then::OpenDoor);
+    assert_eq!(run.code(), 4, "{}", run.text());
+    assert!(run.has_event("door-open"), "{:?}", run.rec.events);
+}
+
 #[test]
 fn a_mistyped_device_choice_fails_with_exit_2_before_anything_loads() {
     // The trajectory does not exist: had anything been loaded, the error would name the file.
@@ -373,6 +443,8 @@ fn a_mistyped_device_choice_fails_with_exit_2_before_anything_loads() {
         ("--light", "dmx"),
         ("--light", "dmx:/dev/null,addr=600"),
         ("--perception", "icpp"),
+        ("--trigger", "dmx:/dev/ttyUSB0"),
+        ("--trigger", "trigger:"),
         ("--stub-fault", "estopp@1"),
     ] {
         let out = common::hitl(&["run", "/nonexistent/traj.npz", flag, value]);

@@ -13,19 +13,19 @@
 //!
 //! Refusals, each with its reason and remedy (docs/calibration.md): 3 the solution's residuals or
 //! conditioning are poor (noise; views too alike); [`TOO_FEW_VIEWS`] fewer usable views than the
-//! minimum; [`BOARD_OUT_OF_VIEW`] the board was seen, but not whole in enough views;
+//! minimum (also: a `--from-recording` file, cut short or not, holding fewer captures than a live
+//! calibration plans); [`BOARD_OUT_OF_VIEW`] the board was seen, but not whole in enough views;
 //! [`NEVER_DETECTED`] no tag of the board in any capture. A plan with fewer than
 //! [`MIN_PLANNED_VIEWS`] reachable views is refused before anything moves.
 
+use crate::cli::device_flags::{DeviceFlags, LabFlags, Labs, Refusal, SimCameraFlags};
 use crate::control::session::{self, ArmTarget, RunRequest};
-use crate::devices::CameraSpec;
 use crate::exit;
 use crate::rt::RtOptions;
 use foxglove::messages as fg;
 use hitl_calib::board::{load_board_file, Board};
 use hitl_calib::solve::{self, Acceptance, SolveError, View};
 use hitl_calib::views::{self, ViewPlan};
-use hitl_drivers::light::LightSpec;
 use hitl_hal::Intrinsics;
 use hitl_perception::{BackendSpec, ReregisterPolicy};
 use hitl_record::{reader, topics};
@@ -59,30 +59,17 @@ pub struct CalibrateArgs {
     /// default: the lab configuration's `[board]`, else that repository board.
     #[arg(long, value_name = "BOARD.toml")]
     pub board: Option<PathBuf>,
-    /// Lab configuration the controller uses (its nominal camera mount and target pose).
-    #[arg(long, value_name = "FILE.toml")]
-    pub config: Option<PathBuf>,
-    /// Drive the real xArm at this address. Without it the embedded stub is used.
-    #[arg(long, value_name = "HOST")]
-    pub arm: Option<String>,
-    /// SITL: the lab the embedded stub simulates (the truth to recover).
-    #[arg(long, value_name = "TRUE.toml")]
-    pub stub_config: Option<PathBuf>,
+    #[command(flatten)]
+    pub devices: DeviceFlags,
+    /// The controller's lab (its nominal camera mount and target pose), the stub's hidden true
+    /// lab (the truth to recover) and the operator's confirmation.
+    #[command(flatten)]
+    pub labs: LabFlags,
+    #[command(flatten)]
+    pub sim_camera: SimCameraFlags,
     /// Views to plan (15-25).
     #[arg(long, default_value_t = 20, value_name = "N")]
     pub views: usize,
-    /// Camera: sim (the stub's) or an Orbbec spec as `hitl run --camera`.
-    #[arg(long, default_value = "sim", value_name = "sim|orbbec|...")]
-    pub camera: CameraSpec,
-    /// Light: as `hitl run --light`.
-    #[arg(long, default_value = "sim", value_name = "sim|dmx:DEV|trigger:DEV|none")]
-    pub light: LightSpec,
-    /// Simulated camera intrinsics preset (nfov, wfov, orbbec).
-    #[arg(long, default_value = "orbbec", value_name = "NAME")]
-    pub camera_preset: String,
-    /// Simulated camera resolution, WxH.
-    #[arg(long, default_value = "640x400", value_name = "WxH")]
-    pub camera_size: String,
     /// Keep the captures: record the calibration run to this MCAP file.
     #[arg(long, value_name = "FILE.mcap")]
     pub record: Option<PathBuf>,
@@ -94,9 +81,6 @@ pub struct CalibrateArgs {
     /// Largest RMS reprojection error accepted, pixels.
     #[arg(long, default_value_t = Acceptance::default().max_rms_px, value_name = "PX")]
     pub max_rms_px: f64,
-    /// Do not ask for confirmation before moving a real arm.
-    #[arg(long)]
-    pub yes: bool,
     /// SCHED_FIFO priority of the loop thread (0: normal scheduler).
     #[arg(long, default_value_t = 80, value_name = "PRIO")]
     pub rt_priority: i32,
@@ -104,10 +88,6 @@ pub struct CalibrateArgs {
     #[arg(long)]
     pub plain: bool,
 }
-
-/// A refusal: exit code and message.
-#[derive(Debug)]
-struct Refusal(u8, String);
 
 fn refuse<T>(code: u8, m: impl Into<String>) -> Result<T, Refusal> {
     Err(Refusal(code, m.into()))
@@ -120,13 +100,6 @@ pub fn run(args: CalibrateArgs) -> u8 {
             crate::errln!("hitl calibrate: {m}");
             code
         }
-    }
-}
-
-fn load_lab(path: &Option<PathBuf>, what: &str) -> Result<LabConfig, Refusal> {
-    match path {
-        None => Ok(LabConfig::default()),
-        Some(p) => LabConfig::load(p).map_err(|e| Refusal(exit::BAD_INPUT, format!("{what}: {e}"))),
     }
 }
 
@@ -162,20 +135,9 @@ fn write_atomic(path: &Path, bytes: &[u8]) -> Result<(), Refusal> {
     })
 }
 
-fn parse_size(s: &str) -> Result<(u32, u32), Refusal> {
-    let bad =
-        || Refusal(exit::BAD_INPUT, format!("--camera-size {s:?}: expected WxH, e.g. 640x400"));
-    let (w, h) = s.split_once(['x', 'X']).ok_or_else(bad)?;
-    let w: u32 = w.trim().parse().map_err(|_| bad())?;
-    let h: u32 = h.trim().parse().map_err(|_| bad())?;
-    if !(8..=8192).contains(&w) || !(8..=8192).contains(&h) {
-        return Err(bad());
-    }
-    Ok((w, h))
-}
-
 fn calibrate(args: CalibrateArgs) -> Result<(), Refusal> {
-    let lab = load_lab(&args.config, "--config")?;
+    let labs = args.labs.load(args.devices.arm.as_deref())?;
+    let lab = labs.controller.clone();
     let placement = board_placement(&args, &lab)?;
     let board = Board::new(&placement).map_err(|e| Refusal(exit::BAD_INPUT, e.to_string()))?;
     if let Some(svg) = &args.print_board {
@@ -198,19 +160,23 @@ fn calibrate(args: CalibrateArgs) -> Result<(), Refusal> {
             "--out CALIBRATED.toml is required (or --print-board FILE.svg)",
         );
     };
-    if args.arm.is_some() && args.stub_config.is_some() {
-        return refuse(
-            exit::BAD_INPUT,
-            "--stub-config only applies to the embedded stub, not to --arm",
-        );
-    }
-    let size = parse_size(&args.camera_size)?;
-    let k = hitl_sim_stub::camera::Preset::from_name(&args.camera_preset)
-        .ok_or_else(|| {
-            Refusal(
+    for (flag, input) in [("--from-recording", &args.from_recording), ("--record", &args.record)] {
+        if input.as_deref().is_some_and(|i| same_file(i, &out)) {
+            return refuse(
                 exit::BAD_INPUT,
-                format!("--camera-preset {:?}: nfov, wfov or orbbec", args.camera_preset),
-            )
+                format!(
+                    "--out {} is the recording ({flag}): the calibrated lab would replace it; \
+                     choose another --out",
+                    out.display()
+                ),
+            );
+        }
+    }
+    let size = args.sim_camera.camera_size.unwrap_or((640, 400));
+    let preset = &args.sim_camera.camera_preset;
+    let k = hitl_sim_stub::camera::Preset::from_name(preset)
+        .ok_or_else(|| {
+            Refusal(exit::BAD_INPUT, format!("--camera-preset {preset:?}: nfov, wfov or orbbec"))
         })?
         .at(size.0, size.1);
 
@@ -226,14 +192,15 @@ fn calibrate(args: CalibrateArgs) -> Result<(), Refusal> {
         }
         None => {
             let dir = Scratch::new()?;
-            let record = play_views(&args, &lab, &placement, &board, &k, size, dir.path())?;
+            let record = play_views(&args, &labs, &placement, &board, &k, size, dir.path())?;
             _scratch = Some(dir);
             (record, exit::DEVICE)
         }
     };
 
     // 3. Detect the board in every capture, with the flange pose at its exposure.
-    let (views_seen, k_rec) = read_views(&record, &board, unreadable)?;
+    let min_captures = args.from_recording.is_some().then_some(MIN_PLANNED_VIEWS);
+    let (views_seen, k_rec) = read_views(&record, &board, unreadable, min_captures)?;
     let k = k_rec.unwrap_or(k);
     let acc = Acceptance { max_rms_px: args.max_rms_px, ..Acceptance::default() };
     judge_detections(&views_seen, &board, &acc)?;
@@ -306,7 +273,7 @@ fn calibrate(args: CalibrateArgs) -> Result<(), Refusal> {
     let text = format!(
         "# Written by hitl calibrate on {} from {}.\n{}",
         calibrated.calibration.as_ref().map(|c| c.date.clone()).unwrap_or_default(),
-        args.config.as_ref().map_or("the default lab".into(), |p| p.display().to_string()),
+        args.labs.config.as_ref().map_or("the default lab".into(), |p| p.display().to_string()),
         calibrated.to_toml()
     );
     write_atomic(&out, text.as_bytes())?;
@@ -319,7 +286,7 @@ fn calibrate(args: CalibrateArgs) -> Result<(), Refusal> {
 /// recording the captures; returns the recording's path (in `dir` unless `--record`).
 fn play_views(
     args: &CalibrateArgs,
-    lab: &LabConfig,
+    labs: &Labs,
     placement: &BoardPlacement,
     board: &Board,
     k: &Intrinsics,
@@ -336,10 +303,8 @@ fn play_views(
             ),
         );
     }
-    let mut stub_lab = match &args.stub_config {
-        Some(_) => Some(load_lab(&args.stub_config, "--stub-config")?),
-        None => None,
-    };
+    let lab = &labs.controller;
+    let mut stub_lab = labs.stub.clone();
     // The board is on the mount in the simulated lab too, where its own [board] (or ours) says.
     if let Some(s) = stub_lab.as_mut() {
         s.board.get_or_insert_with(|| placement.clone());
@@ -347,7 +312,7 @@ fn play_views(
     let mut lab_with_board = lab.clone();
     lab_with_board.board = Some(placement.clone());
     // Without a hidden truth, the stub simulates the controller's lab, board included.
-    if args.arm.is_none() && stub_lab.is_none() {
+    if args.devices.arm.is_none() && stub_lab.is_none() {
         stub_lab = Some(lab_with_board.clone());
     }
 
@@ -395,17 +360,10 @@ fn play_views(
 
     // 2. Play them through the run session, recording the captures.
     let record = args.record.clone().unwrap_or_else(|| dir.join("calibration.mcap"));
-    let target = match &args.arm {
+    let target = match &args.devices.arm {
         None => ArmTarget::Stub { faults: Vec::new() },
         Some(host) => {
-            if !args.yes && !confirm(host) {
-                return refuse(
-                    exit::BAD_INPUT,
-                    format!(
-                        "not confirmed that the enclosure around {host} is clear; nothing moved"
-                    ),
-                );
-            }
+            args.labs.confirm_real_arm(host)?;
             ArmTarget::Remote { host: host.clone() }
         }
     };
@@ -418,11 +376,12 @@ fn play_views(
         target,
         record: Some(record.clone()),
         record_compression: hitl_record::RecorderConfig::default().compression,
-        camera: args.camera,
-        light: args.light.clone(),
+        camera: args.devices.run_camera(),
+        light: args.devices.run_light(),
+        trigger: args.devices.run_trigger(),
         perception: BackendSpec::None,
         reregister: ReregisterPolicy::default(),
-        camera_preset: args.camera_preset.clone(),
+        camera_preset: args.sim_camera.camera_preset.clone(),
         camera_size: Some(size),
         target_model: "asymmetric".into(),
         stub_lab,
@@ -468,6 +427,18 @@ fn judge_detections(views_seen: &[View], board: &Board, acc: &Acceptance) -> Res
                  id), and that the camera is focused",
                 board.describe(),
                 views_seen.len()
+            ),
+        );
+    }
+    let detected = views_seen.iter().filter(|v| !v.corners.is_empty()).count();
+    if detected < acc.min_views {
+        return refuse(
+            TOO_FEW_VIEWS,
+            format!(
+                "the board was detected in only {detected} of {} captures; at least {} views \
+                 with the board are needed: take more views",
+                views_seen.len(),
+                acc.min_views
             ),
         );
     }
@@ -519,6 +490,15 @@ fn utc_now() -> String {
     format!("{y:04}-{m:02}-{d:02}T{:02}:{:02}:{:02}Z", rem / 3600, rem % 3600 / 60, rem % 60)
 }
 
+/// Whether two paths name the same file (both canonicalised; a path that does not exist yet is
+/// no existing file).
+fn same_file(a: &Path, b: &Path) -> bool {
+    match (std::fs::canonicalize(a), std::fs::canonicalize(b)) {
+        (Ok(a), Ok(b)) => a == b,
+        _ => a == b,
+    }
+}
+
 /// A private temporary folder for the views' trajectory and recording, removed when dropped.
 struct Scratch(tempfile::TempDir);
 
@@ -536,27 +516,27 @@ impl Scratch {
     }
 }
 
-fn confirm(host: &str) -> bool {
-    if !std::io::stdin().is_terminal() {
-        return false;
-    }
-    crate::err!("About to move the REAL arm at {host} through the calibration views. Is the enclosure clear and the door closed? [y/N] ");
-    let mut line = String::new();
-    std::io::stdin().read_line(&mut line).is_ok()
-        && matches!(line.trim(), "y" | "Y" | "yes" | "YES")
-}
-
 /// The recording's colour captures, each with the flange pose at its exposure (from `/tf`) and
-/// the board corners found in it; and the camera's intrinsics as recorded.
+/// the board corners found in it; and the camera's intrinsics as recorded. A recording that was
+/// not read to its end (cut short, damaged) is used as far as it is sound, and says so; with
+/// `min_captures` (`--from-recording`: the fewest views a live calibration plans), fewer
+/// captures than that are refused with [`TOO_FEW_VIEWS`] before any detection.
 fn read_views(
     path: &Path,
     board: &Board,
     code: u8,
+    min_captures: Option<usize>,
 ) -> Result<(Vec<View>, Option<Intrinsics>), Refusal> {
     let bad = |m: String| {
         Refusal(code, format!("reading the calibration recording {}: {m}", path.display()))
     };
-    let rec = reader::read_recording(path).map_err(|e| bad(e.to_string()))?;
+    let rec = reader::read_recording(path)
+        .map_err(|e| Refusal(code, format!("the calibration recording: {e}")))?;
+    let end = rec.end.clone();
+    let partial = end.as_ref().and_then(|e| e.warning(path));
+    if let Some(w) = &partial {
+        crate::errln!("hitl calibrate: warning: {w}");
+    }
     let mut images: Vec<(u64, fg::RawImage)> = Vec::new();
     let mut k: Option<Intrinsics> = None;
     reader::visit(
@@ -576,6 +556,25 @@ fn read_views(
     )
     .map_err(|e| bad(e.to_string()))?;
     images.sort_by_key(|(t, _)| *t);
+    if let Some(min) = min_captures.filter(|m| images.len() < *m) {
+        let read = match (&partial, &end) {
+            (Some(_), Some(e)) => format!(
+                "{} was not read to its end ({}; {}): what was read",
+                path.display(),
+                e.truncated.as_deref().unwrap_or("it stopped early"),
+                e.frames_text()
+            ),
+            _ => path.display().to_string(),
+        };
+        return refuse(
+            TOO_FEW_VIEWS,
+            format!(
+                "{read} holds {} captures, fewer than the {min} views a calibration solves from \
+                 (as many as a live one plans); record the views again (hitl calibrate --record)",
+                images.len()
+            ),
+        );
+    }
     let mut out = Vec::new();
     for (t, img) in images {
         let Some(tf) = rec.tf.iter().min_by_key(|m| m.t_ns.abs_diff(t)) else { continue };
@@ -632,6 +631,13 @@ mod tests {
         };
         assert_eq!(code, BOARD_OUT_OF_VIEW, "{m}");
         assert!(m.contains("only 5 of 20"), "{m}");
+        // Detected in only 6 of 20 (whole in those): too few views, exit 10 as a live run's.
+        let few: Vec<View> = (0..20).map(|i| view(if i < 6 { 144 } else { 0 })).collect();
+        let Err(Refusal(code, m)) = judge_detections(&few, &board, &acc) else {
+            panic!("accepted")
+        };
+        assert_eq!(code, TOO_FEW_VIEWS, "{m}");
+        assert!(m.contains("only 6 of 20"), "{m}");
         let whole: Vec<View> = (0..20).map(|_| view(144)).collect();
         assert!(judge_detections(&whole, &board, &acc).is_ok());
     }

@@ -5,6 +5,7 @@ pub mod bench;
 pub mod calibrate;
 pub mod campaign;
 pub mod check;
+pub mod device_flags;
 pub mod eval;
 pub mod export;
 pub mod plan;

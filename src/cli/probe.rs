@@ -6,30 +6,23 @@
 //! command that could move the arm is sent (only reads: serial number, version, state, codes).
 //! Exit 0 when every named device answered, 5 naming the first one that did not, 2 for bad flags.
 
+use crate::cli::device_flags::DeviceFlags;
+use crate::devices::{CameraSpec, LightSpec, TriggerSpec};
 use crate::exit;
 use crate::{errln, outln};
 use hitl_drivers::light::enttec::{probe_widget, Reply};
-use hitl_drivers::light::{LightSpec, SerialLight};
+use hitl_drivers::light::{TriggerBox, TriggerBoxConfig};
 use hitl_drivers::xarm::{ClientConfig, XarmClient};
 use hitl_hal::{Arm as _, Inputs as _, MonotonicClock};
 use hitl_trajectories::joint_table::JointTable;
 use std::time::Duration;
 
-/// Commission devices: list what is connected and check that each named device answers.
+/// Commission devices: list what is connected and check that each named device answers. The
+/// device flags are `run`'s and `calibrate`'s; only the devices named are opened.
 #[derive(Debug, clap::Args)]
 pub struct ProbeArgs {
-    /// Arm control box to query: HOST (command port 502) or HOST:PORT (a `hitl stub` on another
-    /// port). Only reads are sent: serial number, firmware version, state, error codes.
-    #[arg(long, value_name = "HOST")]
-    pub arm: Option<String>,
-    /// Require an Orbbec camera: without it, cameras are listed (profiles, sync modes) but none
-    /// found is not a failure.
-    #[arg(long)]
-    pub camera: bool,
-    /// Light to open: `dmx:DEV[,addr=N][,16bit]` (the Enttec widget) or `trigger:DEV` (the
-    /// trigger box: pinged, inputs printed). `sim` and `none` are accepted and probe nothing.
-    #[arg(long, value_name = "SPEC")]
-    pub light: Option<LightSpec>,
+    #[command(flatten)]
+    pub devices: DeviceFlags,
 }
 
 /// One named device that did not answer.
@@ -41,17 +34,28 @@ struct Failed {
 pub fn run(args: ProbeArgs) -> u8 {
     list_serial_ports();
     let mut failed: Vec<Failed> = Vec::new();
-    if let Some(spec) = &args.light {
+    let d = &args.devices;
+    if let Some(spec) = &d.light {
         if let Err(why) = probe_light(spec) {
             failed.push(Failed { device: "light", why });
         }
     }
-    if let Some(host) = &args.arm {
+    // A box named as both light and trigger answers once.
+    let probed_as_light =
+        |port: &str| matches!(&d.light, Some(LightSpec::Trigger { port: p }) if p == port);
+    if let Some(port) =
+        d.trigger.as_ref().and_then(TriggerSpec::port).filter(|p| !probed_as_light(p))
+    {
+        if let Err(why) = with_runtime(probe_trigger_box(port)) {
+            failed.push(Failed { device: "trigger", why });
+        }
+    }
+    if let Some(host) = &d.arm {
         if let Err(why) = probe_arm(host) {
             failed.push(Failed { device: "arm", why });
         }
     }
-    if let Err(why) = probe_camera(args.camera) {
+    if let Err(why) = probe_camera(matches!(d.camera, Some(CameraSpec::Orbbec(_)))) {
         failed.push(Failed { device: "camera", why });
     }
     match failed.first() {
@@ -94,57 +98,63 @@ fn list_serial_ports() {
     }
 }
 
-fn probe_light(spec: &LightSpec) -> Result<(), String> {
+/// Run one probe's I/O on a small runtime of its own (the drivers' tasks live on it).
+fn with_runtime(
+    probe: impl std::future::Future<Output = Result<(), String>>,
+) -> Result<(), String> {
     let rt = tokio::runtime::Builder::new_multi_thread()
         .worker_threads(1)
         .enable_all()
         .build()
         .map_err(|e| format!("cannot start the I/O runtime: {e}"))?;
-    rt.block_on(async {
-        if let LightSpec::Dmx { port, .. } = spec {
-            // A widget answers a parameters request; a bare serial port (or a dead widget) does not.
-            let reply =
-                probe_widget(port, Duration::from_millis(500)).await.map_err(|e| e.to_string())?;
-            match reply {
-                Reply::Parameters { firmware, break_time, mab_time, rate } => outln!(
-                    "DMX widget {spec}: Enttec DMX USB Pro firmware {}.{}, break {:.0} us, \
-                     mark-after-break {:.0} us, {}",
-                    firmware >> 8,
-                    firmware & 0xFF,
-                    f64::from(break_time) * 10.67,
-                    f64::from(mab_time) * 10.67,
-                    if rate == 0 {
-                        "as fast as possible".to_string()
-                    } else {
-                        format!("{rate} packets/s")
-                    }
-                ),
-                other => outln!("DMX widget {spec}: answered ({other:?})"),
-            }
-            return Ok(());
+    rt.block_on(probe)
+}
+
+fn probe_light(spec: &LightSpec) -> Result<(), String> {
+    match spec {
+        LightSpec::Dmx { port, .. } => with_runtime(probe_widget_on(port, spec)),
+        LightSpec::Trigger { port } => with_runtime(probe_trigger_box(port)),
+        LightSpec::Sim | LightSpec::None => {
+            outln!("light {spec}: nothing to probe (not a serial device)");
+            Ok(())
         }
-        let light =
-            SerialLight::open(spec, MonotonicClock::new()).await.map_err(|e| e.to_string())?;
-        match light {
-            Some(SerialLight::Trigger(mut tb)) => {
-                // `open` has already seen the ping's acknowledgement and a first input report.
-                let inputs = tb.read().map_err(|e| e.to_string())?;
-                outln!(
-                    "trigger box {spec}: answered the ping; e-stop {}, door {}",
-                    if inputs.estop_pressed { "PRESSED" } else { "released" },
-                    if inputs.door_open { "OPEN" } else { "closed" }
-                );
-                if let Some(u) = tb.clock_uncertainty_ns() {
-                    outln!("  clock offset known to {:.0} us", u as f64 / 1e3);
-                }
-                Ok(())
-            }
-            _ => {
-                outln!("light {spec}: nothing to probe (not a serial device hitl probe knows)");
-                Ok(())
-            }
-        }
-    })
+    }
+}
+
+/// A widget answers a parameters request; a bare serial port (or a dead widget) does not.
+async fn probe_widget_on(port: &str, spec: &LightSpec) -> Result<(), String> {
+    let reply = probe_widget(port, Duration::from_millis(500)).await.map_err(|e| e.to_string())?;
+    match reply {
+        Reply::Parameters { firmware, break_time, mab_time, rate } => outln!(
+            "DMX widget {spec}: Enttec DMX USB Pro firmware {}.{}, break {:.0} us, \
+             mark-after-break {:.0} us, {}",
+            firmware >> 8,
+            firmware & 0xFF,
+            f64::from(break_time) * 10.67,
+            f64::from(mab_time) * 10.67,
+            if rate == 0 { "as fast as possible".to_string() } else { format!("{rate} packets/s") }
+        ),
+        other => outln!("DMX widget {spec}: answered ({other:?})"),
+    }
+    Ok(())
+}
+
+/// The trigger box: its inputs, and how well its clock is known.
+async fn probe_trigger_box(port: &str) -> Result<(), String> {
+    let mut tb = TriggerBox::open(port, TriggerBoxConfig::default(), MonotonicClock::new())
+        .await
+        .map_err(|e| e.to_string())?;
+    // `open` has already seen the ping's acknowledgement and a first input report.
+    let inputs = tb.read().map_err(|e| e.to_string())?;
+    outln!(
+        "trigger box trigger:{port}: answered the ping; e-stop {}, door {}",
+        if inputs.estop_pressed { "PRESSED" } else { "released" },
+        if inputs.door_open { "OPEN" } else { "closed" }
+    );
+    if let Some(u) = tb.clock_uncertainty_ns() {
+        outln!("  clock offset known to {:.0} us", u as f64 / 1e3);
+    }
+    Ok(())
 }
 
 fn probe_arm(host: &str) -> Result<(), String> {

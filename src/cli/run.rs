@@ -4,17 +4,15 @@
 //! xArm moves: the operator must confirm the enclosure is clear (or pass `--yes`), and the run
 //! refuses when it cannot ask.
 
+use crate::cli::device_flags::{DeviceFlags, LabFlags, Refusal, SimCameraFlags};
 use crate::cli::reregister::ReregisterArgs;
 use crate::control::session::{self, ArmTarget, RunRequest, StubFault};
-use crate::devices::CameraSpec;
 use crate::exit;
 use crate::rt::RtOptions;
-use hitl_drivers::light::LightSpec;
 use hitl_perception::BackendSpec;
 use hitl_record::live::DEFAULT_LIVE_ADDR;
 use hitl_record::{ChunkCompression, LiveConfig, RecorderConfig};
-use hitl_trajectories::lab::LabConfig;
-use std::io::{BufRead, IsTerminal, Write};
+use std::io::IsTerminal;
 use std::net::{IpAddr, SocketAddr};
 use std::path::PathBuf;
 use std::time::Duration;
@@ -23,9 +21,12 @@ use std::time::Duration;
 pub struct RunArgs {
     /// The trajectory to play (NPZ, see docs/npz-schema.md).
     pub trajectory: PathBuf,
-    /// Drive the real xArm at this address (host or IP). Without it the embedded stub is used.
-    #[arg(long, value_name = "HOST")]
-    pub arm: Option<String>,
+    #[command(flatten)]
+    pub devices: DeviceFlags,
+    #[command(flatten)]
+    pub labs: LabFlags,
+    #[command(flatten)]
+    pub sim_camera: SimCameraFlags,
     /// Control rate in Hz (50-1000).
     #[arg(long, default_value_t = 250.0, value_name = "HZ")]
     pub rate: f64,
@@ -44,37 +45,15 @@ pub struct RunArgs {
     /// measures each.
     #[arg(long, default_value_t = RecorderConfig::default().compression, value_name = "NAME")]
     pub record_compression: ChunkCompression,
-    /// Lab configuration (TOML). Defaults to the DreamSat-Bench enclosure.
-    #[arg(long, value_name = "FILE.toml")]
-    pub config: Option<PathBuf>,
-    /// Camera: sim (the stub's rendered camera), orbbec (hardware-triggered by the trigger box's
-    /// camera line: needs --light trigger:DEV), orbbec:hardware (the same), orbbec:software (a
-    /// model documented for software triggering, e.g. the Gemini 305), or none.
-    #[arg(long, default_value = "sim", value_name = "sim|orbbec|none")]
-    pub camera: CameraSpec,
-    /// Light: sim, dmx:DEV[,addr=N][,16bit] (Enttec DMX USB Pro), trigger:DEV (the trigger box:
-    /// light level, camera trigger line, e-stop and door inputs), or none.
-    #[arg(long, default_value = "sim", value_name = "sim|dmx:DEV|trigger:DEV|none")]
-    pub light: LightSpec,
     /// Pose estimation on captured frames: icp, onnx:MODEL, socket:PATH (an external estimator
     /// listening on a unix socket, docs/perception.md), or none.
     #[arg(long, default_value = "none", value_name = "icp|onnx:MODEL|socket:PATH|none")]
     pub perception: BackendSpec,
     #[command(flatten)]
     pub reregister: ReregisterArgs,
-    /// Simulated camera intrinsics: nfov, wfov (the paper's presets) or orbbec.
-    #[arg(long, default_value = "orbbec", value_name = "nfov|wfov|orbbec")]
-    pub camera_preset: String,
-    /// Simulated camera resolution (intrinsics scaled to it), e.g. 320x256.
-    #[arg(long, value_name = "WxH", value_parser = parse_size)]
-    pub camera_size: Option<(u32, u32)>,
     /// Target model: asymmetric, one-plane, two-planes (built in) or an OBJ/STL file.
     #[arg(long, default_value = "asymmetric", value_name = "NAME|FILE")]
     pub target_model: String,
-    /// SITL: the lab the embedded stub simulates (camera mount, target pose, board), while the
-    /// controller keeps --config (how a calibration is tested against a hidden truth).
-    #[arg(long, value_name = "TRUE.toml")]
-    pub stub_config: Option<PathBuf>,
     /// The simulated camera's depth: ideal (as rendered, every surface pixel exact; the SITL
     /// accuracy figures' setting) or orbbec (the Gemini 305's stereo depth: error growing with
     /// z^2, no depth at edges, in the projector's shadow and at grazing angles;
@@ -90,9 +69,6 @@ pub struct RunArgs {
     /// stall-replies, arm-error, deviation, estop, door-open; e.g. `--stub-fault estop@2.5`.
     #[arg(long = "stub-fault", value_name = "KIND@SECONDS")]
     pub stub_faults: Vec<StubFault>,
-    /// Do not ask for confirmation before moving a real arm (the enclosure is known to be clear).
-    #[arg(long)]
-    pub yes: bool,
     /// SCHED_FIFO priority of the loop thread (0: normal scheduler).
     #[arg(long, default_value_t = 80, value_name = "PRIO")]
     pub rt_priority: i32,
@@ -128,29 +104,6 @@ fn parse_live_addr(s: &str) -> Result<SocketAddr, String> {
         })
 }
 
-fn parse_size(s: &str) -> Result<(u32, u32), String> {
-    let (w, h) = s.split_once(['x', 'X']).ok_or("expected WIDTHxHEIGHT, e.g. 320x256")?;
-    let parse = |v: &str| v.trim().parse::<u32>().ok().filter(|n| (8..=8192).contains(n));
-    match (parse(w), parse(h)) {
-        (Some(w), Some(h)) => Ok((w, h)),
-        _ => Err(format!("'{s}': width and height must be whole numbers from 8 to 8192")),
-    }
-}
-
-/// Ask the operator to confirm the enclosure is clear; `None` when there is no one to ask.
-fn confirm_enclosure_clear(host: &str) -> Option<bool> {
-    if !std::io::stdin().is_terminal() {
-        return None;
-    }
-    crate::err!(
-        "About to move the REAL arm at {host}. Is the enclosure clear and the door closed? [y/N] "
-    );
-    let _ = std::io::stderr().flush();
-    let mut line = String::new();
-    std::io::stdin().lock().read_line(&mut line).ok()?;
-    Some(matches!(line.trim(), "y" | "Y" | "yes" | "YES"))
-}
-
 fn default_record_path() -> PathBuf {
     let secs = std::time::SystemTime::now()
         .duration_since(std::time::UNIX_EPOCH)
@@ -174,20 +127,19 @@ pub fn run(args: RunArgs, record: bool) -> u8 {
         );
         return exit::BAD_INPUT;
     }
-    let mut lab = match &args.config {
-        Some(path) => match LabConfig::load(path) {
-            Ok(lab) => lab,
-            Err(e) => {
-                crate::errln!("hitl run: {e}");
-                return exit::BAD_INPUT;
-            }
-        },
-        None => LabConfig::default(),
+    let arm = args.devices.arm.as_deref();
+    let labs = match args.labs.load(arm) {
+        Ok(labs) => labs,
+        Err(Refusal(code, m)) => {
+            crate::errln!("hitl run: {m}");
+            return code;
+        }
     };
+    let mut lab = labs.controller;
     if let Some(kind) = args.scene_kind {
         lab.scene.kind = kind;
     }
-    let target = match &args.arm {
+    let target = match arm {
         None => ArmTarget::Stub { faults: args.stub_faults.clone() },
         Some(host) => {
             if !args.stub_faults.is_empty() {
@@ -196,23 +148,11 @@ pub fn run(args: RunArgs, record: bool) -> u8 {
                 );
                 return exit::BAD_INPUT;
             }
-            if !args.yes {
-                match confirm_enclosure_clear(host) {
-                    Some(true) => {}
-                    Some(false) => {
-                        crate::errln!("hitl run: not confirmed; nothing moved");
-                        return exit::BAD_INPUT;
-                    }
-                    None => {
-                        crate::errln!(
-                            "hitl run: refusing to move the real arm at {host}: no terminal to confirm \
-                             the enclosure is clear (pass --yes if it is)"
-                        );
-                        return exit::BAD_INPUT;
-                    }
-                }
+            if let Err(Refusal(code, m)) = args.labs.confirm_real_arm(host) {
+                crate::errln!("hitl run: {m}");
+                return code;
             }
-            ArmTarget::Remote { host: host.clone() }
+            ArmTarget::Remote { host: host.to_string() }
         }
     };
     let record = match (&args.record, record) {
@@ -221,22 +161,6 @@ pub fn run(args: RunArgs, record: bool) -> u8 {
         // The live view is fed by the recorder.
         (None, false) if args.live.is_some() => Some(default_record_path()),
         (None, false) => None,
-    };
-    let stub_lab = match &args.stub_config {
-        None => None,
-        Some(_) if args.arm.is_some() => {
-            crate::errln!(
-                "hitl run: --stub-config only applies to the embedded stub, not to --arm"
-            );
-            return exit::BAD_INPUT;
-        }
-        Some(path) => match LabConfig::load(path) {
-            Ok(lab) => Some(lab),
-            Err(e) => {
-                crate::errln!("hitl run: --stub-config: {e}");
-                return exit::BAD_INPUT;
-            }
-        },
     };
     let request = RunRequest {
         trajectory: args.trajectory,
@@ -247,14 +171,15 @@ pub fn run(args: RunArgs, record: bool) -> u8 {
         target,
         record,
         record_compression: args.record_compression,
-        camera: args.camera,
-        light: args.light,
+        camera: args.devices.run_camera(),
+        light: args.devices.run_light(),
+        trigger: args.devices.run_trigger(),
         perception: args.perception,
         reregister,
-        camera_preset: args.camera_preset,
-        camera_size: args.camera_size,
+        camera_preset: args.sim_camera.camera_preset,
+        camera_size: args.sim_camera.camera_size,
         target_model: args.target_model,
-        stub_lab,
+        stub_lab: labs.stub,
         depth_model: args.depth_model,
         rt: RtOptions {
             fifo_priority: (args.rt_priority > 0).then_some(args.rt_priority),

@@ -4,7 +4,7 @@
 use super::any::{Kinds, RunCamera, Unmanaged};
 use super::none::NoCamera;
 use super::{DeviceError, OpenContext};
-use hitl_drivers::light::LightSpec;
+use hitl_drivers::light::{LightSpec, TriggerSpec};
 use hitl_drivers::orbbec::TriggerChoice;
 use hitl_hal::{Intrinsics, StreamConfig};
 use std::fmt;
@@ -99,14 +99,19 @@ fn preset_intrinsics(preset: &str, size: Option<(u32, u32)>) -> Result<Intrinsic
 
 /// Refuse a camera that cannot be triggered with the devices chosen, before anything opens: a
 /// hardware-triggered Orbbec camera (the default) takes its frames on the trigger box's camera
-/// line, so without `--light trigger:DEV` every capture would be missed and the camera would
-/// fault mid-run.
-pub fn check_trigger_wiring(camera: CameraSpec, light: &LightSpec) -> Result<(), DeviceError> {
-    match (camera, light) {
-        (CameraSpec::Orbbec(TriggerChoice::Software), _) | (_, LightSpec::Trigger { .. }) => Ok(()),
-        (CameraSpec::Orbbec(_), _) => Err(DeviceError::BadInput(format!(
+/// line, so without a trigger box (`--trigger trigger:DEV`, or `--light trigger:DEV` taking both
+/// roles) every capture would be missed and the camera would fault mid-run.
+pub fn check_trigger_wiring(
+    camera: CameraSpec,
+    light: &LightSpec,
+    trigger: &TriggerSpec,
+) -> Result<(), DeviceError> {
+    let has_box = trigger.port().is_some() || matches!(light, LightSpec::Trigger { .. });
+    match camera {
+        CameraSpec::Orbbec(TriggerChoice::Software) => Ok(()),
+        CameraSpec::Orbbec(_) if !has_box => Err(DeviceError::BadInput(format!(
             "--camera {camera} is hardware-triggered: its sync input is driven by the trigger \
-             box's camera line, so name the box with --light trigger:DEV (docs/devices.md), or \
+             box's camera line, so name the box with --trigger trigger:DEV (docs/devices.md), or \
              use --camera orbbec:software on a model documented for software triggering \
              (Gemini 305)"
         ))),
@@ -181,17 +186,24 @@ mod tests {
     #[test]
     fn a_hardware_triggered_orbbec_needs_the_trigger_box() {
         let none = LightSpec::None;
-        let tb = LightSpec::Trigger { port: "/dev/ttyACM0".into() };
+        let no_box = TriggerSpec::None;
+        let tb_light = LightSpec::Trigger { port: "/dev/ttyACM0".into() };
+        let tb = TriggerSpec::Box { port: "/dev/ttyACM0".into() };
+        let dmx: LightSpec = "dmx:/dev/ttyUSB0".parse().expect("dmx");
         let auto = CameraSpec::Orbbec(TriggerChoice::Auto);
         let hw = CameraSpec::Orbbec(TriggerChoice::Hardware);
         let sw = CameraSpec::Orbbec(TriggerChoice::Software);
         assert!(
-            matches!(check_trigger_wiring(auto, &none), Err(DeviceError::BadInput(m)) if m.contains("--light trigger:DEV"))
+            matches!(check_trigger_wiring(auto, &none, &no_box), Err(DeviceError::BadInput(m)) if m.contains("--trigger trigger:DEV"))
         );
-        assert!(check_trigger_wiring(hw, &LightSpec::Sim).is_err());
-        assert_eq!(check_trigger_wiring(auto, &tb), Ok(()));
-        assert_eq!(check_trigger_wiring(hw, &tb), Ok(()));
-        assert_eq!(check_trigger_wiring(sw, &none), Ok(()));
-        assert_eq!(check_trigger_wiring(CameraSpec::None, &none), Ok(()));
+        assert!(check_trigger_wiring(hw, &LightSpec::Sim, &no_box).is_err());
+        assert!(check_trigger_wiring(hw, &dmx, &no_box).is_err());
+        // The box named as the trigger, the light elsewhere: a DMX lab triggers its camera.
+        assert_eq!(check_trigger_wiring(hw, &dmx, &tb), Ok(()));
+        // The old spelling: the box as the light takes both roles.
+        assert_eq!(check_trigger_wiring(auto, &tb_light, &no_box), Ok(()));
+        assert_eq!(check_trigger_wiring(hw, &tb_light, &no_box), Ok(()));
+        assert_eq!(check_trigger_wiring(sw, &none, &no_box), Ok(()));
+        assert_eq!(check_trigger_wiring(CameraSpec::None, &none, &no_box), Ok(()));
     }
 }

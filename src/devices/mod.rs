@@ -6,6 +6,8 @@
 //! - [`camera`]: `--camera` ([`CameraSpec`]), the stream asked of it, and opening it;
 //! - [`light`]: `--light` (the drivers' `LightSpec` registry) and the inputs and trigger lines
 //!   that come with a light device;
+//! - [`trigger`]: `--trigger` (the drivers' `TriggerSpec` registry): which device fires the
+//!   camera and feeds its e-stop and door to the interlocks;
 //! - [`inputs`]: every safety-input source of the run, read together;
 //! - [`any`]: the trait objects and adapters that give the loop one type per role;
 //! - [`none`]: the deliberately absent devices;
@@ -19,10 +21,11 @@ pub mod light;
 pub mod none;
 #[cfg(feature = "stub")]
 pub mod stub;
+pub mod trigger;
 
 pub use any::{RunCamera, RunLight, RunTrigger};
 pub use camera::{CameraSpec, CameraSpecError};
-pub use hitl_drivers::light::LightSpec;
+pub use hitl_drivers::light::{LightSpec, TriggerSpec};
 pub use inputs::RunInputs;
 
 use hitl_hal::{Lifecycle, MonotonicClock, RgbdCamera, StreamConfig};
@@ -104,6 +107,8 @@ impl OpenContext<'_> {
 pub struct DeviceChoice {
     pub camera: CameraSpec,
     pub light: LightSpec,
+    /// The device that fires the camera and feeds its inputs (`--trigger`).
+    pub trigger: TriggerSpec,
     /// The stream asked of the camera.
     pub stream: StreamConfig,
 }
@@ -121,8 +126,9 @@ pub fn open_devices(
     choice: &DeviceChoice,
     ctx: &OpenContext<'_>,
 ) -> Result<RunDevices, DeviceError> {
-    camera::check_trigger_wiring(choice.camera, &choice.light)?;
-    let opened = light::open_light(&choice.light, ctx)?;
+    camera::check_trigger_wiring(choice.camera, &choice.light, &choice.trigger)?;
+    let mut opened = light::open_light(&choice.light, ctx)?;
+    trigger::open_trigger(&choice.trigger, &choice.light, &mut opened, ctx)?;
     let camera = camera::open_camera(choice.camera, &choice.stream, ctx)?;
     #[cfg_attr(not(feature = "stub"), allow(unused_mut))]
     let mut inputs = opened.inputs;

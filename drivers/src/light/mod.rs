@@ -9,8 +9,7 @@
 //! - [`spec`]: the `--light sim|dmx:DEV|trigger:DEV|none` choice ([`LightSpec`]) and the registry
 //!   that opens a serial light as trait objects ([`OpenedLight`]): a new kind of light is its
 //!   driver file plus its arms in `spec.rs`;
-//! - [`fault`]: the drivers' error type and sticky lock-free health flag;
-//! - [`open`]: [`SerialLight`], the serial light a [`LightSpec`] names, opened.
+//! - [`fault`]: the drivers' error type and sticky lock-free health flag.
 //!
 //! Every driver here is a tick-side handle that only touches atomics and lock-free queues, plus a
 //! tokio task that owns the port; the caller's runtime must outlive the handle (it is the run's
@@ -20,7 +19,6 @@
 pub mod dmx;
 pub mod enttec;
 pub mod fault;
-pub mod open;
 pub mod protocol;
 pub mod serial;
 pub mod spec;
@@ -28,8 +26,9 @@ pub mod trigger_box;
 
 pub use dmx::{DmxConfig, DmxLight, DmxResolution};
 pub use fault::{Fault, SerialError};
-pub use open::SerialLight;
-pub use spec::{InputsDriver, LightDriver, LightSpec, OpenedLight, TriggerDriver};
+pub use spec::{
+    InputsDriver, LightDriver, LightSpec, OpenedLight, OpenedTrigger, TriggerDriver, TriggerSpec,
+};
 pub use trigger_box::{TriggerBox, TriggerBoxConfig};
 
 #[cfg(test)]
@@ -40,6 +39,5 @@ mod tests {
         fn send<T: Send + 'static>() {}
         send::<super::DmxLight>();
         send::<super::TriggerBox>();
-        send::<super::SerialLight>();
     }
 }

@@ -1,7 +1,8 @@
-//! `--light sim|dmx:DEV[,addr=N][,16bit]|trigger:DEV|none`: which light drives the Sun, and the
-//! registry of the serial lights: parsing a choice ([`LightSpec`]'s `FromStr`), naming it
-//! (`Display`) and opening it ([`LightSpec::open`]) are the one place a new kind of light is
-//! registered. The controller (src/devices) wraps whatever [`OpenedLight`] holds without naming
+//! `--light sim|dmx:DEV[,addr=N][,16bit]|trigger:DEV|none`: which light drives the Sun, and
+//! `--trigger trigger:DEV|none`: which box fires the camera's sync input and feeds its e-stop and
+//! door to the interlocks. The registry of the serial devices: parsing a choice ([`LightSpec`]'s
+//! and [`TriggerSpec`]'s `FromStr`), naming it (`Display`) and opening it ([`LightSpec::open`],
+//! [`TriggerSpec::open`]) are the one place a new kind of light or trigger is registered. The controller (src/devices) wraps whatever [`OpenedLight`] holds without naming
 //! any driver; `sim` and `none` are not drivers and are handled there.
 
 use std::fmt;
@@ -151,5 +152,101 @@ impl LightSpec {
                 })
             }
         })
+    }
+}
+
+/// The trigger role chosen on the command line (`--trigger`): the device whose camera line fires
+/// the camera's sync input and whose e-stop and door inputs feed the interlocks.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub enum TriggerSpec {
+    /// The trigger box at `port` (docs/trigger-box.md).
+    Box { port: String },
+    /// No trigger device: a simulated or software-triggered camera, inputs from elsewhere.
+    None,
+}
+
+/// Why a `--trigger` value was refused.
+#[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
+#[error("--trigger {value:?}: {reason} (expected trigger:DEV or none)")]
+pub struct TriggerSpecError {
+    pub value: String,
+    pub reason: String,
+}
+
+impl FromStr for TriggerSpec {
+    type Err = TriggerSpecError;
+
+    fn from_str(s: &str) -> Result<Self, Self::Err> {
+        let err = |reason: &str| TriggerSpecError { value: s.to_string(), reason: reason.into() };
+        if s == "none" {
+            return Ok(TriggerSpec::None);
+        }
+        match s.split_once(':') {
+            Some(("trigger", "")) => Err(err("missing serial device after trigger:")),
+            Some(("trigger", port)) => Ok(TriggerSpec::Box { port: port.to_string() }),
+            Some(("dmx", _)) => Err(err("a DMX widget has no trigger line")),
+            _ => Err(err("unknown trigger device")),
+        }
+    }
+}
+
+impl fmt::Display for TriggerSpec {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        match self {
+            TriggerSpec::Box { port } => write!(f, "trigger:{port}"),
+            TriggerSpec::None => f.write_str("none"),
+        }
+    }
+}
+
+/// A trigger device, opened: its camera and strobe lines and the safety inputs it reads.
+pub struct OpenedTrigger {
+    /// Names the device and its port, for messages ("trigger box on /dev/ttyACM0").
+    pub name: String,
+    pub trigger: Box<dyn TriggerDriver>,
+    pub inputs: Box<dyn InputsDriver>,
+}
+
+impl TriggerSpec {
+    /// The serial port of the box this names, if any.
+    pub fn port(&self) -> Option<&str> {
+        match self {
+            TriggerSpec::Box { port } => Some(port),
+            TriggerSpec::None => None,
+        }
+    }
+
+    /// Open the trigger device this names (`Ok(None)` for `none`). Runs inside the run's
+    /// runtime, as [`LightSpec::open`] does.
+    pub async fn open(&self, clock: MonotonicClock) -> Result<Option<OpenedTrigger>, SerialError> {
+        Ok(match self {
+            TriggerSpec::None => None,
+            TriggerSpec::Box { port } => {
+                let tb = TriggerBox::open(port, TriggerBoxConfig::default(), clock).await?;
+                Some(OpenedTrigger {
+                    name: format!("trigger box on {port}"),
+                    trigger: Box::new(tb.clone()),
+                    inputs: Box::new(tb),
+                })
+            }
+        })
+    }
+}
+
+#[cfg(test)]
+mod trigger_spec_tests {
+    use super::*;
+
+    #[test]
+    fn trigger_specs_parse_and_name_themselves() {
+        let t: TriggerSpec = "trigger:/dev/ttyACM0".parse().expect("box");
+        assert_eq!(t, TriggerSpec::Box { port: "/dev/ttyACM0".into() });
+        assert_eq!(t.to_string(), "trigger:/dev/ttyACM0");
+        assert_eq!(t.port(), Some("/dev/ttyACM0"));
+        assert_eq!("none".parse::<TriggerSpec>(), Ok(TriggerSpec::None));
+        for bad in ["trigger:", "dmx:/dev/ttyUSB0", "sim", "box", ""] {
+            let e = bad.parse::<TriggerSpec>().expect_err(bad);
+            assert!(e.to_string().contains("--trigger"), "{e}");
+        }
     }
 }

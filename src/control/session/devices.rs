@@ -63,6 +63,7 @@ pub(super) fn start_recorder(
             "camera_preset": req.camera_preset,
             "camera_size": req.camera_size,
             "light": req.light.to_string(),
+            "trigger": req.trigger.to_string(),
             "perception": perception_name(&req.perception),
             "record_compression": req.record_compression.to_string(),
             "reregister": req.reregister,

@@ -32,8 +32,8 @@ use crate::control::tick::{ControlLoop, Devices, Health, LoopIo, Outcome, Progra
 use crate::devices::arm::{ClientConfig, ReportKind, RunArm, ServoReplies, COMMAND_PORT};
 #[cfg(feature = "stub")]
 use crate::devices::stub::{start_stub, EmbeddedStub};
-use crate::devices::LightSpec;
 use crate::devices::{self as run_devices, CameraSpec, DeviceChoice, DeviceError, RunDevices};
+use crate::devices::{LightSpec, TriggerSpec};
 use crate::exit;
 use crate::rt::{self, slot::LatestSlot, slot::SlotReader, RtOptions};
 use arm_link::{connect_reports, first_report, resolve, spawn_report_reader};
@@ -102,6 +102,8 @@ pub struct RunRequest {
     pub record_compression: ChunkCompression,
     pub camera: CameraSpec,
     pub light: LightSpec,
+    /// The device that fires the camera and feeds its e-stop and door (`--trigger`).
+    pub trigger: TriggerSpec,
     pub perception: BackendSpec,
     /// When the perception backend re-registers beyond its first frame and a lost track.
     pub reregister: ReregisterPolicy,
@@ -402,6 +404,7 @@ fn open_and_start_devices(
     let choice = DeviceChoice {
         camera: req.camera,
         light: req.light.clone(),
+        trigger: req.trigger.clone(),
         stream: run_devices::camera::stream_config(
             req.camera,
             &req.camera_preset,
