@@ -26,10 +26,13 @@ pub enum RecordError {
 /// Why a recording could not be read.
 #[derive(Debug, thiserror::Error)]
 pub enum ReadError {
-    #[error("{path}: {source}")]
+    #[error("{path}: cannot read it: {source}")]
     Io { path: String, source: std::io::Error },
     #[error("{path}: not an MCAP recording: {reason}")]
     NotMcap { path: String, reason: String },
+    /// An MCAP file with nothing to read: no readable chunk and no summary.
+    #[error("{path}: nothing in it can be read: {reason}")]
+    Unreadable { path: String, reason: String },
     #[error("{path}: topic {topic}: bad message: {reason}")]
     BadMessage { path: String, topic: String, reason: String },
 }

@@ -1,6 +1,12 @@
-//! Reading a recording back: walks the file in order (it works on a file cut short by a crash,
-//! up to the last complete record) and decodes the project's messages, for `hitl report` and
-//! `hitl eval`.
+//! Reading a recording back: walks the file in order and decodes the project's messages, for
+//! `hitl report`, `hitl eval`, `hitl calibrate --from-recording` and `hitl export`.
+//!
+//! A damaged or cut file is read as far as it is sound: chunks are checked against their CRC
+//! before any of their messages is handed out, and the walk stops at the first record that is
+//! cut, damaged or does not decompress. [`ReadEnd`] says how far it got: the captures read, the
+//! captures the file's summary says it holds (when it has a readable summary), and why the walk
+//! stopped. A file with neither a readable record nor a readable summary (an empty file, one cut
+//! inside its first chunk) is an error, never an empty recording.
 
 use crate::error::ReadError;
 use crate::msg::{
@@ -12,9 +18,11 @@ use foxglove::messages as fg;
 use hitl_hal::{pose, Intrinsics, Pose};
 use mcap::records::Record;
 use mcap::sans_io::linear_reader::{LinearReadEvent, LinearReader, LinearReaderOptions};
+use mcap::sans_io::summary_reader::{SummaryReadEvent, SummaryReader, SummaryReaderOptions};
+use mcap::McapError;
 use serde::{Deserialize, Serialize};
 use std::collections::{BTreeMap, HashMap};
-use std::io::Read;
+use std::io::{Read, Seek};
 use std::ops::ControlFlow;
 use std::path::Path;
 
@@ -24,10 +32,47 @@ const RECORD_LIMIT: usize = 1 << 30;
 /// How a walk through the file ended.
 #[derive(Debug, Clone, PartialEq, Eq, Serialize)]
 pub struct ReadEnd {
-    /// The footer was reached: the file was closed cleanly.
+    /// The walk reached the footer: the whole file was read (closed cleanly, nothing damaged).
     pub complete: bool,
-    /// Why reading stopped early (a crash-cut file), if it did.
+    /// Why reading stopped before the footer (a file cut short by a crash, damaged bytes), if
+    /// it did.
     pub truncated: Option<String>,
+    /// Captures read: `/camera/calibration` messages (every capture writes one) met before the
+    /// walk ended.
+    pub frames_read: u64,
+    /// Captures the file holds, from its summary's statistics; `None` (unknown) when the file
+    /// has no readable summary (a file cut short has none).
+    pub frames_recorded: Option<u64>,
+}
+
+/// How much of a recording was read: "41 of 41 frames read", "18 of 41 frames read", "18 frames
+/// read of an unknown number recorded" (a file without a summary).
+pub fn frames_text(read: u64, recorded: Option<u64>) -> String {
+    match recorded {
+        Some(n) => format!("{read} of {n} frames read"),
+        None => format!("{read} frames read of an unknown number recorded"),
+    }
+}
+
+impl ReadEnd {
+    /// [`frames_text`] of this walk.
+    pub fn frames_text(&self) -> String {
+        frames_text(self.frames_read, self.frames_recorded)
+    }
+
+    /// One line for the user when not all of the file was read (`None` when it was): why, and
+    /// how much was used.
+    pub fn warning(&self, path: &Path) -> Option<String> {
+        if self.complete {
+            return None;
+        }
+        Some(format!(
+            "{} was not read to its end: {}; {}, only those are used",
+            path.display(),
+            self.truncated.as_deref().unwrap_or("the reading stopped early"),
+            self.frames_text()
+        ))
+    }
 }
 
 /// One message as stored.
@@ -37,7 +82,68 @@ pub struct RawMessage<'a> {
     pub data: &'a [u8],
 }
 
-/// Walk every message and metadata record in file order. `on_msg` may stop the walk early.
+/// What an MCAP error means to someone reading a recording (the crate's own text for an I/O
+/// error speaks of writing).
+fn describe(e: &McapError) -> String {
+    match e {
+        McapError::BadMagic => "it does not start and end with the MCAP magic bytes".into(),
+        McapError::BadChunkCrc { .. } => {
+            format!("damaged bytes: a chunk's checksum does not match its contents ({e})")
+        }
+        McapError::Io(io) => format!("damaged bytes: a chunk does not decompress ({io})"),
+        McapError::DecompressionError(m) => {
+            format!("damaged bytes: a chunk does not decompress ({m})")
+        }
+        McapError::UnexpectedEof => "the file ends in the middle of a record: cut short".into(),
+        McapError::UnexpectedEoc
+        | McapError::BadChunkLength { .. }
+        | McapError::BadSchemaLength { .. }
+        | McapError::RecordTooLarge { .. }
+        | McapError::ChunkTooLarge(_)
+        | McapError::Parse(_) => {
+            format!("damaged bytes: a record's lengths or fields are invalid ({e})")
+        }
+        McapError::UnsupportedCompression(c) => {
+            format!("a chunk uses compression `{c}`, which this reader does not have")
+        }
+        other => format!("an unreadable record ({other})"),
+    }
+}
+
+/// The captures the file's summary says it holds: the message count of `/camera/calibration`
+/// in its statistics. `None` without a readable summary or statistics.
+pub fn frames_recorded(path: &Path) -> Option<u64> {
+    let mut file = std::fs::File::open(path).ok()?;
+    let size = file.metadata().ok()?.len();
+    let mut r = SummaryReader::new_with_options(
+        SummaryReaderOptions::default().with_file_size(size).with_record_length_limit(RECORD_LIMIT),
+    );
+    while let Some(ev) = r.next_event() {
+        match ev.ok()? {
+            SummaryReadEvent::ReadRequest(n) => {
+                let got = file.read(r.insert(n)).ok()?;
+                r.notify_read(got);
+            }
+            SummaryReadEvent::SeekRequest(to) => {
+                let pos = file.seek(to).ok()?;
+                r.notify_seeked(pos);
+            }
+        }
+    }
+    let summary = r.finish()?;
+    let stats = summary.stats?;
+    let counts = &stats.channel_message_counts;
+    let n = summary
+        .channels
+        .iter()
+        .filter(|(_, c)| c.topic == topics::CALIBRATION)
+        .map(|(id, _)| counts.get(id).copied().unwrap_or(0))
+        .sum();
+    Some(n)
+}
+
+/// Walk every message and metadata record in file order, as far as the file is sound (see the
+/// module's documentation). `on_msg` may stop the walk early.
 pub fn visit(
     path: &Path,
     mut on_msg: impl FnMut(RawMessage<'_>) -> ControlFlow<()>,
@@ -47,19 +153,33 @@ pub fn visit(
     let mut file =
         std::fs::File::open(path).map_err(|e| ReadError::Io { path: p.clone(), source: e })?;
     let mut r = LinearReader::new_with_options(
-        LinearReaderOptions::default().with_record_length_limit(RECORD_LIMIT),
+        LinearReaderOptions::default()
+            .with_record_length_limit(RECORD_LIMIT)
+            .with_prevalidate_chunk_crcs(true),
     );
     let mut channels: HashMap<u16, String> = HashMap::new();
-    let mut any_record = false;
+    let (mut bytes, mut any_record, mut data_record) = (0u64, false, false);
     let mut complete = false;
+    let mut frames_read = 0u64;
+    // Why the walk stopped before the footer (None: it reached the footer, or the caller
+    // stopped it).
+    let mut stopped: Option<String> = None;
     while let Some(ev) = r.next_event() {
         let ev = match ev {
             Ok(ev) => ev,
             Err(e) => {
                 if !any_record {
-                    return Err(ReadError::NotMcap { path: p, reason: e.to_string() });
+                    let reason = if bytes == 0 {
+                        "the file is empty (0 bytes)".to_string()
+                    } else {
+                        describe(&e)
+                    };
+                    return Err(ReadError::NotMcap { path: p, reason });
                 }
-                return Ok(ReadEnd { complete, truncated: (!complete).then(|| e.to_string()) });
+                if !complete {
+                    stopped = Some(describe(&e));
+                }
+                break;
             }
         };
         match ev {
@@ -68,9 +188,21 @@ pub fn visit(
                 let got =
                     file.read(buf).map_err(|e| ReadError::Io { path: p.clone(), source: e })?;
                 if got == 0 {
+                    if bytes == 0 {
+                        return Err(ReadError::NotMcap {
+                            path: p,
+                            reason: "the file is empty (0 bytes)".into(),
+                        });
+                    }
                     // End of the file before the footer: a file cut short by a crash.
+                    stopped = Some(if any_record {
+                        "the file ends before its footer: cut short".into()
+                    } else {
+                        format!("the file ends after {bytes} bytes, inside its header")
+                    });
                     break;
                 }
+                bytes += got as u64;
                 r.notify_read(got);
             }
             LinearReadEvent::Record { data, opcode } => {
@@ -78,31 +210,64 @@ pub fn visit(
                 let rec = match mcap::parse_record(opcode, data) {
                     Ok(rec) => rec,
                     Err(e) => {
-                        return Ok(ReadEnd { complete: false, truncated: Some(e.to_string()) })
+                        stopped = Some(describe(&e));
+                        break;
                     }
                 };
                 match rec {
+                    Record::Header(_) => {}
                     Record::Channel(c) => {
+                        data_record = true;
                         channels.insert(c.id, c.topic);
                     }
                     Record::Message { header, data } => {
+                        data_record = true;
                         let topic =
                             channels.get(&header.channel_id).map(String::as_str).unwrap_or("");
+                        if topic == topics::CALIBRATION {
+                            frames_read += 1;
+                        }
                         let m = RawMessage { topic, log_time: header.log_time, data: &data };
                         if on_msg(m).is_break() {
-                            return Ok(ReadEnd { complete: false, truncated: None });
+                            return Ok(ReadEnd {
+                                complete: false,
+                                truncated: None,
+                                frames_read,
+                                frames_recorded: frames_recorded(path),
+                            });
                         }
                     }
-                    Record::Metadata(m) => on_meta(&m.name, &m.metadata),
+                    Record::Metadata(m) => {
+                        data_record = true;
+                        on_meta(&m.name, &m.metadata)
+                    }
                     Record::Footer(_) => complete = true,
-                    _ => {}
+                    _ => data_record = true,
                 }
             }
         }
     }
+    let recorded = frames_recorded(path);
+    if !data_record && recorded.is_none() {
+        // Nothing but (part of) a header: no chunk, no summary. Not an empty recording.
+        return Err(ReadError::Unreadable {
+            path: p,
+            reason: format!(
+                "no readable chunk and no summary in its {bytes} bytes ({}); a recording cut \
+                 off as it started, or not a recording",
+                stopped.as_deref().unwrap_or("nothing after the header")
+            ),
+        });
+    }
     Ok(ReadEnd {
         complete,
-        truncated: (!complete).then(|| "file ends before its footer".to_string()),
+        truncated: if complete {
+            None
+        } else {
+            stopped.or(Some("the file ends before its footer".into()))
+        },
+        frames_read,
+        frames_recorded: recorded,
     })
 }
 

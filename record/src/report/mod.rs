@@ -115,11 +115,12 @@ fn index_html(mcap: &Path, s: &Summary, plots: &[(&str, &str)]) -> String {
     h.push_str(&format!(
         "<!doctype html>\n<html><head><meta charset=\"utf-8\"><title>hitl report: {name}</title>\n<style>body{{font-family:sans-serif;margin:2em;max-width:1150px}}table{{border-collapse:collapse}}td,th{{border:1px solid #ccc;padding:3px 8px;text-align:left}}.bad{{color:#b00}}img{{max-width:100%;border:1px solid #eee;margin:8px 0}}.sheet{{display:grid;grid-template-columns:repeat(auto-fill,minmax(360px,1fr));gap:10px}}.sheet figure{{margin:0}}.sheet img{{width:100%;height:auto;image-rendering:pixelated;margin:0}}.sheet figcaption{{font-size:90%}}.sw{{display:inline-block;width:1.6em;height:0.35em;vertical-align:middle;margin:0 0.4em 0 1em}}</style></head><body>\n<h1>hitl run report</h1>\n<p>{name}</p>\n"
     ));
+    let frames = crate::reader::frames_text(s.frames_read, s.frames_recorded);
     let state = if s.complete {
-        "closed cleanly".to_string()
+        format!("read whole; {frames}")
     } else {
         format!(
-            "<span class=\"bad\">cut short: {}</span>",
+            "<span class=\"bad\">not read to its end: {}; {frames}</span>",
             esc(s.truncated.as_deref().unwrap_or("no footer"))
         )
     };

@@ -73,10 +73,15 @@ pub struct EventLine {
 /// The report's `summary.json`.
 #[derive(Debug, Clone, Default, PartialEq, Serialize)]
 pub struct Summary {
-    /// The file ends with its footer (closed cleanly).
+    /// The whole file was read: it ends with its footer and nothing in it is damaged.
     pub complete: bool,
-    /// Why reading stopped early (crash-cut file).
+    /// Why reading stopped early (a file cut short by a crash, damaged bytes).
     pub truncated: Option<String>,
+    /// Captures read (`/camera/calibration` messages; every capture writes one).
+    pub frames_read: u64,
+    /// Captures the file holds, from its summary; null (unknown) for a file without one (cut
+    /// short).
+    pub frames_recorded: Option<u64>,
     pub duration_s: f64,
     pub topic_counts: BTreeMap<String, u64>,
     /// Telemetry dropped per topic, from the recorder's last counters.
@@ -211,6 +216,8 @@ pub fn summarize(rec: &Recording) -> Summary {
     let end = rec.end.clone();
     Summary {
         complete: end.as_ref().is_some_and(|e| e.complete),
+        frames_read: end.as_ref().map_or(0, |e| e.frames_read),
+        frames_recorded: end.as_ref().and_then(|e| e.frames_recorded),
         truncated: end.and_then(|e| e.truncated),
         duration_s: secs(t_end, t0),
         topic_counts: rec.topic_counts.clone(),
