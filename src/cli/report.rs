@@ -13,8 +13,8 @@ use std::path::PathBuf;
 /// the target's ground-truth and estimated silhouettes outlined) and index.html.
 #[derive(Debug, clap::Args)]
 pub struct ReportArgs {
-    /// The recording (MCAP) to report on; a file cut short by a crash is read up to its last
-    /// complete chunk.
+    /// The recording (MCAP) to report on; a file cut short by a crash or damaged is read as far
+    /// as it is sound, and the report says how many of its frames that was.
     pub recording: PathBuf,
     /// Output folder (default: RUN_report/ next to RUN.mcap).
     #[arg(long)]
@@ -69,6 +69,18 @@ pub fn run(args: ReportArgs) -> u8 {
             if let Some(w) = nominal_hitl_warning(&args.recording) {
                 crate::errln!("hitl report: warning: {w}");
             }
+            if !r.summary.complete {
+                let frames = hitl_record::reader::frames_text(
+                    r.summary.frames_read,
+                    r.summary.frames_recorded,
+                );
+                crate::errln!(
+                    "hitl report: warning: {} was not read to its end: {}; {frames}, the report \
+                     shows only those",
+                    args.recording.display(),
+                    r.summary.truncated.as_deref().unwrap_or("no footer")
+                );
+            }
             if args.json {
                 match serde_json::to_string(&r.summary) {
                     Ok(s) => crate::outln!("{s}"),
@@ -78,13 +90,6 @@ pub fn run(args: ReportArgs) -> u8 {
                     }
                 }
             } else {
-                if !r.summary.complete {
-                    crate::errln!(
-                        "hitl report: {} was cut short ({}); reporting what it holds",
-                        args.recording.display(),
-                        r.summary.truncated.as_deref().unwrap_or("no footer")
-                    );
-                }
                 crate::outln!("{}", r.dir.join("index.html").display());
             }
             exit::OK

@@ -50,6 +50,64 @@ pub(crate) fn io(path: &Path) -> impl FnOnce(std::io::Error) -> ReportError + '_
 
 type PlotFn = fn(&Recording, &Path) -> Result<(), String>;
 
+/// Every plot a report may write (which ones depends on what the run recorded).
+const PLOT_FILES: [&str; 6] = [
+    "joints.svg",
+    "tracking_error.svg",
+    "lateness.svg",
+    "camera_path.svg",
+    "sun_phase.svg",
+    "pose_error.svg",
+];
+
+/// The list of files a report wrote, one path (relative to its folder) a line: the next report
+/// into the folder removes them first, so nothing of an older report survives.
+pub const MANIFEST: &str = ".hitl-report";
+
+/// A file a report writes: a plot, `summary.json`, `index.html` or `contact/NNN.png`.
+fn is_report_file(rel: &str) -> bool {
+    let contact_png = rel
+        .strip_prefix("contact/")
+        .and_then(|n| n.strip_suffix(".png"))
+        .is_some_and(|stem| !stem.is_empty() && stem.bytes().all(|b| b.is_ascii_digit()));
+    contact_png || PLOT_FILES.contains(&rel) || rel == "summary.json" || rel == "index.html"
+}
+
+/// Remove what an earlier report wrote into `dir`, and only that: the files its manifest lists
+/// (each checked to be a name a report writes), or, for a report written before manifests (its
+/// `index.html` is a hitl report's), the plots, `summary.json` and `index.html`. Other files in
+/// the folder are left alone.
+fn clear_previous(dir: &Path) -> Result<(), ReportError> {
+    let manifest = dir.join(MANIFEST);
+    let listed: Vec<String> = match std::fs::read_to_string(&manifest) {
+        Ok(text) => text.lines().map(str::to_string).collect(),
+        Err(e) if e.kind() == std::io::ErrorKind::NotFound => {
+            let index = std::fs::read_to_string(dir.join("index.html")).unwrap_or_default();
+            if !index.contains("<title>hitl report:") {
+                return Ok(());
+            }
+            PLOT_FILES
+                .iter()
+                .chain(&["summary.json", "index.html"])
+                .map(|s| s.to_string())
+                .collect()
+        }
+        Err(e) => return Err(io(&manifest)(e)),
+    };
+    for rel in listed.iter().filter(|r| is_report_file(r)) {
+        let path = dir.join(rel);
+        match std::fs::remove_file(&path) {
+            Ok(()) => {}
+            Err(e) if e.kind() == std::io::ErrorKind::NotFound => {}
+            Err(e) => return Err(io(&path)(e)),
+        }
+    }
+    match std::fs::remove_file(&manifest) {
+        Err(e) if e.kind() != std::io::ErrorKind::NotFound => Err(io(&manifest)(e)),
+        _ => Ok(()),
+    }
+}
+
 /// Read `mcap` and write the report into `out_dir` (default: [`default_out_dir`]); the contact
 /// sheet has no target model, so it shows the recorded masks only.
 pub fn write_report(mcap: &Path, out_dir: Option<&Path>) -> Result<ReportOutput, ReportError> {
@@ -65,6 +123,7 @@ pub fn write_report_with(
     let rec = read_recording(mcap)?;
     let dir = out_dir.map(Path::to_path_buf).unwrap_or_else(|| default_out_dir(mcap));
     std::fs::create_dir_all(&dir).map_err(io(&dir))?;
+    clear_previous(&dir)?;
     let mut summary = summarize(&rec);
     let mut files = Vec::new();
     if opts.contact.frames > 0 {
@@ -102,6 +161,13 @@ pub fn write_report_with(
     let html = dir.join("index.html");
     std::fs::write(&html, index_html(mcap, &summary, &shown)).map_err(io(&html))?;
     files.push(html);
+    let listed: Vec<String> = files
+        .iter()
+        .filter_map(|f| f.strip_prefix(&dir).ok())
+        .map(|r| r.to_string_lossy().replace('\\', "/"))
+        .collect();
+    let manifest = dir.join(MANIFEST);
+    std::fs::write(&manifest, listed.join("\n") + "\n").map_err(io(&manifest))?;
     Ok(ReportOutput { dir, summary, files })
 }
 
