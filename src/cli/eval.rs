@@ -19,7 +19,8 @@ use std::path::PathBuf;
 /// Score a recording's pose estimates against its ground truth.
 #[derive(Debug, clap::Args)]
 pub struct EvalArgs {
-    /// The recording (MCAP); a file cut short by a crash is read up to its last complete chunk.
+    /// The recording (MCAP); a file cut short by a crash or damaged is read as far as it is
+    /// sound, and the output says how many of its frames that was.
     pub recording: PathBuf,
     /// Print one JSON object (frames, scale, mean/median/std of e_t and e_r, failures, ...).
     #[arg(long)]
@@ -77,6 +78,14 @@ pub fn run(args: EvalArgs) -> u8 {
                         "backend {backend}, re-registered {policy}: {} resets",
                         g("backend_resets")
                     );
+                }
+                let frames = hitl_record::reader::frames_text(
+                    g("frames_read").as_u64().unwrap_or(0),
+                    g("frames_recorded").as_u64(),
+                );
+                match g("read_stopped").as_str() {
+                    None => crate::outln!("recording: {frames} (all of it)"),
+                    Some(why) => crate::outln!("recording: {frames} (not to its end: {why})"),
                 }
                 crate::outln!(
                     "ground truth from: {}",
@@ -212,10 +221,22 @@ fn eval(args: &EvalArgs) -> Result<serde_json::Value, String> {
             .and_then(|m| m.get(hitl_record::metadata::CALIBRATION_KEY))
             .map_or("nominal", |c| c.as_str());
         obj.insert("calibration".into(), serde_json::json!(calibration));
+        // How much of the recording was read (a damaged or cut file is read as far as it is
+        // sound): `complete` (also as `recording_complete`, its older name), the frames read
+        // and recorded (null: unknown, the file has no summary) and why reading stopped.
+        let end = rec.end.as_ref();
+        let complete = end.is_some_and(|e| e.complete);
+        obj.insert("recording_complete".into(), serde_json::json!(complete));
+        obj.insert("complete".into(), serde_json::json!(complete));
+        obj.insert("frames_read".into(), serde_json::json!(end.map_or(0, |e| e.frames_read)));
         obj.insert(
-            "recording_complete".into(),
-            serde_json::json!(rec.end.as_ref().is_some_and(|e| e.complete)),
+            "frames_recorded".into(),
+            serde_json::json!(end.and_then(|e| e.frames_recorded)),
         );
+        obj.insert("read_stopped".into(), serde_json::json!(end.and_then(|e| e.truncated.clone())));
+    }
+    if let Some(w) = rec.end.as_ref().and_then(|e| e.warning(path)) {
+        crate::errln!("hitl eval: warning: {w}");
     }
     Ok(v)
 }
