@@ -2,7 +2,8 @@
 //! that `scripts/validate_lerobot.py` (the loader's checks, with pyarrow and PyAV) accepts, with
 //! one parquet row and one video frame per recorded capture; depth read back through LeRobot's
 //! dequantisation lands within one quantum of what was recorded; bad input gets exit 2 and leaves
-//! nothing behind.
+//! nothing behind; `--force` replaces only a dataset the export wrote, never an input recording, a
+//! file or a folder of anyone else's files; every row of docs/lerobot-export.md's exit codes.
 //!
 //! Needs ffmpeg (libx264, libx265) and the test venv's pyarrow and av (`make setup`).
 
@@ -289,4 +290,146 @@ fn a_table_refuses_columns_of_different_lengths() {
     assert!(e.to_string().contains("column b"), "{e}");
     t.columns[1].1 = Column::F32s(7, vec![0.0; 14]);
     t.write(&dir.path().join("x.parquet"), &[(0, 1), (1, 2)]).expect("writes");
+}
+
+/// Every file under `dir` with its bytes, to show nothing was touched.
+fn snapshot(dir: &Path) -> Vec<(PathBuf, Vec<u8>)> {
+    let mut out = Vec::new();
+    let mut stack = vec![dir.to_path_buf()];
+    while let Some(d) = stack.pop() {
+        for e in std::fs::read_dir(&d).expect("read dir") {
+            let p = e.expect("entry").path();
+            if p.is_dir() {
+                stack.push(p);
+            } else {
+                let bytes = std::fs::read(&p).expect("read");
+                out.push((p, bytes));
+            }
+        }
+    }
+    out.sort();
+    out
+}
+
+#[test]
+fn force_replaces_only_a_dataset_the_export_wrote_never_an_input_or_anyone_elses_files() {
+    let dir = tempfile::tempdir().expect("tempdir");
+    let d = dir.path();
+    // `make demo`'s layout: the recording, its trajectory and its report in one folder.
+    let demo = d.join("demo");
+    std::fs::create_dir_all(demo.join("report")).expect("mkdir");
+    let mcap = demo.join("run.mcap");
+    synthetic(&mcap, 3, (32, 24), |_| 1.0);
+    std::fs::write(demo.join("fly.npz"), "trajectory").expect("write");
+    std::fs::write(demo.join("report/index.html"), "report").expect("write");
+    let before = snapshot(&demo);
+
+    // --out the folder the recording is in, or the recording itself: refused, --force or not.
+    for out in [&demo, &mcap] {
+        for force in [&[][..], &["--force"][..]] {
+            let (code, text) = export(&[&[s(&mcap), "--out", s(out)][..], force].concat());
+            assert_eq!(code, Some(2), "{text}");
+            assert!(text.contains("holds the input recording"), "{text}");
+            assert!(
+                snapshot(&demo) == before,
+                "--out {} {force:?} touched the input",
+                out.display()
+            );
+        }
+    }
+    // The same through another spelling of the path (a `..` and a symbolic link).
+    let link = d.join("link");
+    std::os::unix::fs::symlink(&demo, &link).expect("symlink");
+    let (code, text) = export(&[s(&mcap), "--out", s(&link.join("../demo")), "--force"]);
+    assert_eq!(code, Some(2), "{text}");
+    assert!(snapshot(&demo) == before);
+
+    // A folder of someone's files: refused with --force, its files as they were.
+    let thesis = d.join("thesis");
+    std::fs::create_dir(&thesis).expect("mkdir");
+    std::fs::write(thesis.join("thesis.txt"), "four years").expect("write");
+    let (code, text) = export(&[s(&mcap), "--out", s(&thesis), "--force"]);
+    assert_eq!(code, Some(2), "{text}");
+    assert!(text.contains("not a dataset hitl export wrote"), "{text}");
+    assert_eq!(std::fs::read_to_string(thesis.join("thesis.txt")).expect("read"), "four years");
+
+    // A plain file: refused, --force or not, left as it was, nothing written beside it.
+    let file = d.join("ds.txt");
+    std::fs::write(&file, "keep").expect("write");
+    for force in [&[][..], &["--force"][..]] {
+        let (code, text) = export(&[&[s(&mcap), "--out", s(&file)][..], force].concat());
+        assert_eq!(code, Some(2), "{text}");
+        assert!(text.contains("is a file"), "{text}");
+    }
+    assert_eq!(std::fs::read_to_string(&file).expect("read"), "keep");
+
+    // A dataset the export wrote: replaced with --force ...
+    let ds = d.join("ds");
+    let (code, text) = export(&[s(&mcap), "--out", s(&ds)]);
+    assert_eq!(code, Some(0), "{text}");
+    let (code, text) = export(&[s(&mcap), "--out", s(&ds), "--force", "--fps", "3"]);
+    assert_eq!(code, Some(0), "{text}");
+    let info = std::fs::read_to_string(ds.join("meta/info.json")).expect("info.json");
+    assert_eq!(serde_json::from_str::<Value>(&info).expect("json")["fps"], 3);
+    // ... but not once a file of someone else's is in it.
+    std::fs::write(ds.join("notes.md"), "mine").expect("write");
+    let (code, text) = export(&[s(&mcap), "--out", s(&ds), "--force"]);
+    assert_eq!(code, Some(2), "{text}");
+    assert!(text.contains("notes.md"), "{text}");
+    assert_eq!(std::fs::read_to_string(ds.join("notes.md")).expect("read"), "mine");
+    only(d, &["demo", "link", "thesis", "ds.txt", "ds"]);
+}
+
+#[test]
+fn every_exit_code_of_the_docs_table() {
+    let dir = tempfile::tempdir().expect("tempdir");
+    let d = dir.path();
+    let mcap = d.join("run.mcap");
+    synthetic(&mcap, 2, (32, 24), |_| 1.0);
+    let out = d.join("ds");
+    // 2: --fps outside 1..=1000, refused where the command line is read (before ffmpeg).
+    for fps in ["0", "1001", "4294967295"] {
+        let (code, text) = export(&[s(&mcap), "--out", s(&out), "--fps", fps]);
+        assert_eq!(code, Some(2), "--fps {fps}: {text}");
+        assert!(text.contains("--fps"), "{text}");
+    }
+    // 2: an --out that cannot be written: under a file, and (not as root, whom permissions do
+    // not stop) under a read-only folder. Refused before the recordings are read.
+    let file = d.join("plain");
+    std::fs::write(&file, "x").expect("write");
+    let (code, text) = export(&[s(&mcap), "--out", s(&file.join("ds"))]);
+    assert_eq!(code, Some(2), "{text}");
+    assert!(text.contains("plain"), "{text}");
+    {
+        use std::os::unix::fs::PermissionsExt;
+        let ro = d.join("ro");
+        std::fs::create_dir(&ro).expect("mkdir");
+        std::fs::set_permissions(&ro, std::fs::Permissions::from_mode(0o555)).expect("chmod");
+        if std::fs::write(ro.join("probe"), "x").is_err() {
+            let (code, text) = export(&[s(&mcap), "--out", s(&ro.join("ds"))]);
+            assert_eq!(code, Some(2), "{text}");
+            assert!(text.contains("cannot write into"), "{text}");
+        }
+        std::fs::set_permissions(&ro, std::fs::Permissions::from_mode(0o755)).expect("chmod");
+        std::fs::remove_dir_all(&ro).expect("rm");
+    }
+    // 2: an empty file; the folder made for --out's parent is gone again.
+    let empty = d.join("empty.mcap");
+    std::fs::write(&empty, b"").expect("write");
+    let (code, text) = export(&[s(&empty), "--out", s(&d.join("new/ds"))]);
+    assert_eq!(code, Some(2), "{text}");
+    assert!(text.contains("empty.mcap") && text.contains("empty (0 bytes)"), "{text}");
+    // 1: ffmpeg missing (the machine's failure, not the input's).
+    let o = Command::new(env!("CARGO_BIN_EXE_hitl"))
+        .args(["export", "lerobot", s(&mcap), "--out", s(&out)])
+        .env("PATH", d)
+        .output()
+        .expect("run hitl");
+    let text = String::from_utf8_lossy(&o.stderr);
+    assert_eq!(o.status.code(), Some(1), "{text}");
+    assert!(text.contains("ffmpeg"), "{text}");
+    // 0: done.
+    let (code, text) = export(&[s(&mcap), "--out", s(&out), "--json"]);
+    assert_eq!(code, Some(0), "{text}");
+    only(d, &["run.mcap", "plain", "empty.mcap", "ds"]);
 }

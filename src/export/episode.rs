@@ -2,8 +2,9 @@
 //! recorded, with what the run knew at that instant (joints at exposure, the tick's setpoint,
 //! camera pose, ground truth, estimate, intrinsics), and the run's orbit metadata.
 //!
-//! Reads the recording with `hitl_record::reader` (a file cut short by a crash is read up to its
-//! last complete record); the pixels are read later, frame by frame, by [`crate::export::video`].
+//! Reads the recording with `hitl_record::reader` (a file cut short by a crash or damaged is read
+//! as far as it is sound, and the episode says how much that was); the pixels are read later,
+//! frame by frame, by [`crate::export::video`].
 
 use super::ExportError;
 use hitl_hal::Pose;
@@ -73,8 +74,14 @@ pub struct Frame {
 pub struct EpisodeMeta {
     /// The recording's file name.
     pub recording: String,
-    /// The file was closed cleanly (false: cut short, read up to its last complete record).
+    /// The whole file was read (false: cut short or damaged, read as far as it is sound).
     pub complete: bool,
+    /// Captures read from the file.
+    pub frames_read: u64,
+    /// Captures the file holds (its summary); null: unknown (no summary, a file cut short).
+    pub frames_recorded: Option<u64>,
+    /// Why reading stopped before the end of the file.
+    pub read_stopped: Option<String>,
     pub trajectory_sha256: Option<String>,
     /// The trajectory's `meta` as recorded: for `hitl plan` trajectories, the orbital elements,
     /// ROE, scale, time scale and every other input of the plan (docs/planner.md).
@@ -297,6 +304,9 @@ fn episode_meta(
             .file_name()
             .map_or_else(|| path.display().to_string(), |n| n.to_string_lossy().into_owned()),
         complete: rec.end.as_ref().is_some_and(|e| e.complete),
+        frames_read: rec.end.as_ref().map_or(0, |e| e.frames_read),
+        frames_recorded: rec.end.as_ref().and_then(|e| e.frames_recorded),
+        read_stopped: rec.end.as_ref().and_then(|e| e.truncated.clone()),
         trajectory_sha256: get("trajectory_sha256").filter(|s| !s.is_empty()),
         orbit,
         scale,

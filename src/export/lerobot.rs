@@ -9,6 +9,9 @@
 //!
 //! The dataset is written into a hidden folder next to `--out` and renamed into place at the
 //! end: a failed export leaves nothing (the hidden folder is removed), never half a dataset.
+//! What `--out` names is checked before anything is read ([`check_out`]): it never holds an input
+//! recording, and `--force` replaces only a dataset this export wrote (never a file, never a
+//! folder of other files).
 
 use super::episode::{read_episode, Episode, Frame, Stream};
 use super::tables::{tasks_table, Column, Table};
@@ -28,6 +31,8 @@ const DATA_PATH: &str = "data/chunk-{chunk_index:03d}/file-{file_index:03d}.parq
 const VIDEO_PATH: &str = "videos/{video_key}/chunk-{chunk_index:03d}/file-{file_index:03d}.mp4";
 const JOINTS: [&str; 7] = ["joint1", "joint2", "joint3", "joint4", "joint5", "joint6", "joint7"];
 const POSE: [&str; 7] = ["x", "y", "z", "qx", "qy", "qz", "qw"];
+/// `meta/hitl.json`'s `generator` starts with this: the marker [`recognise_dataset`] looks for.
+pub const GENERATOR: &str = "hitl export lerobot";
 
 /// The feature key of a stream's video.
 pub fn video_key(s: Stream) -> &'static str {
@@ -43,12 +48,31 @@ pub fn video_key(s: Stream) -> &'static str {
 pub struct ExportRequest {
     pub recordings: Vec<PathBuf>,
     pub out: PathBuf,
-    /// Frames per second of the dataset's time grid (default: the captures' median rate).
+    /// Frames per second of the dataset's time grid (default: the captures' median rate); 1 to
+    /// [`MAX_FPS`].
     pub fps: Option<u32>,
     /// The task text of every episode (default: from the trajectory's preset and range).
     pub task: Option<String>,
     /// Replace `out` if it exists.
     pub force: bool,
+}
+
+/// The highest `--fps` (and the highest rate the captures' median may give).
+pub const MAX_FPS: u32 = 1000;
+
+/// How much of one recording the export read (a damaged or cut file is read as far as it is
+/// sound).
+#[derive(Debug, Clone, serde::Serialize)]
+pub struct RecordingRead {
+    pub recording: PathBuf,
+    /// The whole file was read.
+    pub complete: bool,
+    /// Captures read.
+    pub frames_read: u64,
+    /// Captures the file holds (its summary); null: unknown (no summary, a file cut short).
+    pub frames_recorded: Option<u64>,
+    /// Why reading stopped before the end.
+    pub read_stopped: Option<String>,
 }
 
 /// What was written.
@@ -65,6 +89,10 @@ pub struct ExportSummary {
     pub videos: Vec<String>,
     pub width: u32,
     pub height: u32,
+    /// Per recording, how much of it was read.
+    pub recordings: Vec<RecordingRead>,
+    /// Every recording was read to its end.
+    pub complete: bool,
 }
 
 /// Export recordings as one LeRobot v3.0 dataset.
@@ -72,17 +100,17 @@ pub fn export(req: &ExportRequest) -> Result<ExportSummary, ExportError> {
     if req.recordings.is_empty() {
         return Err(ExportError::BadInput("no recordings to export".into()));
     }
-    check_out(&req.out, req.force)?;
+    if let Some(f) = req.fps.filter(|f| !(1..=MAX_FPS).contains(f)) {
+        return Err(ExportError::BadInput(format!("--fps {f}: give 1 to {MAX_FPS}")));
+    }
+    let (out, existing) = check_out(&req.out, req.force, &req.recordings)?;
+    // The hidden folder first: an output that cannot be written is refused before the work.
+    let tmp = TempDir::beside(&out)?;
     let episodes = req.recordings.iter().map(|p| read_episode(p)).collect::<Result<Vec<_>, _>>()?;
     let (width, height, streams) = common_shape(&episodes)?;
     video::check_ffmpeg(streams.iter().copied())?;
-    let fps = match req.fps {
-        Some(0) => return Err(ExportError::BadInput("--fps must be at least 1".into())),
-        Some(f) => f,
-        None => capture_fps(&episodes),
-    };
+    let fps = req.fps.unwrap_or_else(|| capture_fps(&episodes));
 
-    let tmp = TempDir::beside(&req.out)?;
     let root = tmp.path.clone();
     let quant = DepthQuant::LEROBOT_DEFAULT;
     let logs = root.join(".ffmpeg");
@@ -144,7 +172,7 @@ pub fn export(req: &ExportRequest) -> Result<ExportSummary, ExportError> {
     write_json(&root.join("meta/info.json"), &info)?;
     write_json(&root.join("meta/stats.json"), &stats(&data))?;
     let sidecar = json!({
-        "generator": format!("hitl export lerobot {}", env!("CARGO_PKG_VERSION")),
+        "generator": format!("{GENERATOR} {}", env!("CARGO_PKG_VERSION")),
         "fps": fps,
         "fps_source": if req.fps.is_some() { "--fps" } else { "median capture interval" },
         "depth_quantisation": {"scale": "log", "min_m": quant.min_m, "max_m": quant.max_m,
@@ -153,8 +181,20 @@ pub fn export(req: &ExportRequest) -> Result<ExportSummary, ExportError> {
     });
     write_json(&root.join("meta/hitl.json"), &sidecar)?;
 
-    tmp.commit(&req.out, req.force)?;
+    tmp.commit(&out, existing)?;
+    let recordings: Vec<RecordingRead> = episodes
+        .iter()
+        .map(|e| RecordingRead {
+            recording: e.path.clone(),
+            complete: e.meta.complete,
+            frames_read: e.meta.frames_read,
+            frames_recorded: e.meta.frames_recorded,
+            read_stopped: e.meta.read_stopped.clone(),
+        })
+        .collect();
     Ok(ExportSummary {
+        complete: recordings.iter().all(|r| r.complete),
+        recordings,
         out: req.out.clone(),
         fps,
         episodes: n_ep,
@@ -167,17 +207,158 @@ pub fn export(req: &ExportRequest) -> Result<ExportSummary, ExportError> {
     })
 }
 
-fn check_out(out: &Path, force: bool) -> Result<(), ExportError> {
-    if out.exists() && !force {
-        let empty_dir = std::fs::read_dir(out).map(|mut d| d.next().is_none()).unwrap_or(false);
-        if !empty_dir {
-            return Err(ExportError::Output(format!(
-                "{} exists: choose another --out or pass --force to replace it",
-                out.display()
-            )));
+/// What is at `--out` before the export, as [`check_out`] found it.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Existing {
+    Nothing,
+    EmptyFolder,
+    /// A dataset this export wrote (replaced with `--force`).
+    Dataset,
+}
+
+/// `path` made absolute with its symbolic links resolved, also when it does not exist yet (its
+/// nearest existing ancestor is resolved).
+fn resolved(path: &Path) -> std::io::Result<PathBuf> {
+    let abs = std::path::absolute(path)?;
+    let mut rest = Vec::new();
+    let mut head = abs.as_path();
+    loop {
+        match std::fs::canonicalize(head) {
+            Ok(c) => return Ok(rest.iter().rev().fold(c, |p, n| p.join(n))),
+            Err(e) => match (head.parent(), head.file_name()) {
+                (Some(parent), Some(name)) => {
+                    rest.push(name.to_os_string());
+                    head = parent;
+                }
+                _ => return Err(e),
+            },
         }
     }
-    Ok(())
+}
+
+/// Check what `--out` names before anything is read or written; returns it resolved, and what
+/// is there. Refused (exit 2): an `--out` that is or holds an input recording (whatever
+/// `--force` says), a plain file or a link, a folder with files in it without `--force`, and
+/// with `--force` a folder that is not a dataset this export wrote ([`recognise_dataset`]).
+pub fn check_out(
+    out: &Path,
+    force: bool,
+    inputs: &[PathBuf],
+) -> Result<(PathBuf, Existing), ExportError> {
+    let shown = out.display();
+    let refuse = |why: String| Err(ExportError::Output(why));
+    let abs = resolved(out)
+        .map_err(|e| ExportError::Output(format!("--out {shown}: cannot resolve it: {e}")))?;
+    if abs.parent().is_none() || abs.file_name().is_none() {
+        return refuse(format!("--out {shown} is not a folder a dataset can be written to"));
+    }
+    for input in inputs {
+        let Ok(r) = std::fs::canonicalize(input) else { continue };
+        if r.starts_with(&abs) {
+            return refuse(format!(
+                "--out {shown} holds the input recording {}: the dataset would replace it; \
+                 choose another --out",
+                input.display()
+            ));
+        }
+    }
+    let meta = match std::fs::symlink_metadata(out) {
+        Ok(m) => m,
+        Err(e) if e.kind() == std::io::ErrorKind::NotFound => return Ok((abs, Existing::Nothing)),
+        Err(e) => return refuse(format!("--out {shown}: {e}")),
+    };
+    if !meta.is_dir() {
+        return refuse(format!(
+            "--out {shown} exists and is {}, not a dataset folder: the export never replaces \
+             one, --force or not; choose another --out",
+            if meta.file_type().is_symlink() { "a symbolic link" } else { "a file" }
+        ));
+    }
+    let empty = std::fs::read_dir(out)
+        .map_err(|e| ExportError::Output(format!("--out {shown}: {e}")))?
+        .next()
+        .is_none();
+    if empty {
+        return Ok((abs, Existing::EmptyFolder));
+    }
+    if !force {
+        return refuse(format!(
+            "--out {shown} exists: choose another --out, or pass --force to replace a dataset \
+             hitl export wrote there"
+        ));
+    }
+    match recognise_dataset(out) {
+        Ok(()) => Ok((abs, Existing::Dataset)),
+        Err(why) => refuse(format!(
+            "--out {shown} is not a dataset hitl export wrote ({why}): --force replaces only \
+             such a dataset; choose another --out"
+        )),
+    }
+}
+
+/// Whether `rel` (a path inside a dataset, `/`-separated) is a file this export writes.
+fn is_dataset_file(rel: &str) -> bool {
+    let parts: Vec<&str> = rel.split('/').collect();
+    let numbered = |s: &str, prefix: &str, ext: &str| {
+        s.strip_prefix(prefix)
+            .and_then(|s| s.strip_suffix(ext))
+            .is_some_and(|n| n.len() == 3 && n.bytes().all(|b| b.is_ascii_digit()))
+    };
+    let chunk_file =
+        |c: &str, f: &str, ext: &str| numbered(c, "chunk-", "") && numbered(f, "file-", ext);
+    match parts.as_slice() {
+        ["meta", "info.json" | "stats.json" | "tasks.parquet" | "hitl.json"] => true,
+        ["meta", "episodes", c, f] | ["data", c, f] => chunk_file(c, f, ".parquet"),
+        ["videos", key, c, f] => {
+            [COLOR_KEY, DEPTH_KEY, MASK_KEY].contains(key) && chunk_file(c, f, ".mp4")
+        }
+        _ => false,
+    }
+}
+
+/// A folder is a dataset this export wrote when its `meta/info.json` is a LeRobot info (a
+/// `codebase_version` and `features`), its `meta/hitl.json` names this exporter as its
+/// `generator` (the marker), and it holds nothing but the files the export writes (no file of
+/// anyone else's is replaced). Otherwise: why not.
+pub fn recognise_dataset(dir: &Path) -> Result<(), String> {
+    let json = |rel: &str| -> Result<Value, String> {
+        let text = std::fs::read_to_string(dir.join(rel)).map_err(|e| format!("{rel}: {e}"))?;
+        serde_json::from_str(&text).map_err(|e| format!("{rel}: {e}"))
+    };
+    let info = json("meta/info.json")?;
+    if !(info["codebase_version"].is_string() && info["features"].is_object()) {
+        return Err("meta/info.json is not a LeRobot dataset's".into());
+    }
+    let generator = json("meta/hitl.json")?["generator"].as_str().unwrap_or("").to_string();
+    if !generator.starts_with(GENERATOR) {
+        return Err(format!("meta/hitl.json does not name {GENERATOR:?} as its generator"));
+    }
+    let mut foreign = Vec::new();
+    let mut stack = vec![dir.to_path_buf()];
+    while let Some(d) = stack.pop() {
+        for entry in std::fs::read_dir(&d).map_err(|e| format!("{}: {e}", d.display()))? {
+            let entry = entry.map_err(|e| format!("{}: {e}", d.display()))?;
+            let path = entry.path();
+            let kind = entry.file_type().map_err(|e| format!("{}: {e}", path.display()))?;
+            let rel = path
+                .strip_prefix(dir)
+                .map(|r| r.to_string_lossy().replace('\\', "/"))
+                .unwrap_or_default();
+            if kind.is_dir() {
+                stack.push(path);
+            } else if !(kind.is_file() && is_dataset_file(&rel)) {
+                foreign.push(rel);
+            }
+        }
+    }
+    if foreign.is_empty() {
+        return Ok(());
+    }
+    foreign.sort();
+    let more =
+        if foreign.len() > 3 { format!(" and {} more", foreign.len() - 3) } else { String::new() };
+    foreign.truncate(3);
+    Err(format!("it holds files the export did not write: {}{more}", foreign.join(", ")))
 }
 
 /// One image size and one set of streams for the whole dataset.
@@ -224,7 +405,7 @@ pub fn capture_fps(episodes: &[Episode]) -> u32 {
     }
     d.sort_unstable();
     let median = d[d.len() / 2] as f64;
-    (1e9 / median).round().clamp(1.0, 1000.0) as u32
+    (1e9 / median).round().clamp(1.0, f64::from(MAX_FPS)) as u32
 }
 
 fn task_texts(episodes: &[Episode], task: Option<&str>) -> Vec<String> {
@@ -519,47 +700,82 @@ fn write_json(path: &Path, v: &Value) -> Result<(), ExportError> {
     std::fs::write(path, text + "\n").map_err(|e| io_err("cannot write", path, e))
 }
 
-/// The hidden folder an export is written into; removed unless committed.
+/// The hidden folder an export is written into; removed unless committed, with the folders
+/// above it that were created for it.
 struct TempDir {
     path: PathBuf,
     committed: bool,
+    /// Folders created for `--out`'s parent, innermost first.
+    created: Vec<PathBuf>,
 }
 
 impl TempDir {
     fn beside(out: &Path) -> Result<TempDir, ExportError> {
         let parent = out.parent().filter(|p| !p.as_os_str().is_empty()).unwrap_or(Path::new("."));
-        std::fs::create_dir_all(parent)
-            .map_err(|e| ExportError::Output(format!("cannot create {}: {e}", parent.display())))?;
+        let created: Vec<PathBuf> =
+            parent.ancestors().take_while(|a| !a.exists()).map(Path::to_path_buf).collect();
+        std::fs::create_dir_all(parent).map_err(|e| {
+            ExportError::Output(format!("cannot create {} (for --out): {e}", parent.display()))
+        })?;
         let name = out.file_name().map_or("dataset".into(), |n| n.to_string_lossy().into_owned());
         let path = parent.join(format!(".{name}.partial-{}", std::process::id()));
         if path.exists() {
             std::fs::remove_dir_all(&path).map_err(|e| io_err("cannot remove", &path, e))?;
         }
-        std::fs::create_dir(&path)
-            .map_err(|e| ExportError::Output(format!("cannot create {}: {e}", path.display())))?;
-        Ok(TempDir { path, committed: false })
+        std::fs::create_dir(&path).map_err(|e| {
+            ExportError::Output(format!(
+                "cannot write into {} (for --out {}): {e}",
+                parent.display(),
+                out.display()
+            ))
+        })?;
+        Ok(TempDir { path, committed: false, created })
     }
 
-    /// Rename into place (an existing `out` is moved aside first and removed after).
-    fn commit(mut self, out: &Path, force: bool) -> Result<(), ExportError> {
-        let mut old = None;
-        if out.exists() {
-            if !force && std::fs::remove_dir(out).is_err() {
-                return Err(ExportError::Output(format!(
-                    "{} appeared during the export",
-                    out.display()
-                )));
+    /// Rename into place. `existing` is what [`check_out`] found at `out`: an empty folder is
+    /// removed first; a dataset is moved aside, the new one renamed in, and the old one removed
+    /// (moved back if the rename fails). Anything else there now appeared during the export and
+    /// is left alone.
+    fn commit(mut self, out: &Path, existing: Existing) -> Result<(), ExportError> {
+        let appeared = || {
+            ExportError::Output(format!(
+                "{} appeared or changed during the export; the new dataset is not written",
+                out.display()
+            ))
+        };
+        let mut aside = None;
+        match existing {
+            Existing::Nothing => {
+                if std::fs::symlink_metadata(out).is_ok() {
+                    return Err(appeared());
+                }
             }
-            if out.exists() {
-                let aside = self.path.with_extension("old");
-                std::fs::rename(out, &aside).map_err(|e| io_err("cannot move aside", out, e))?;
-                old = Some(aside);
+            Existing::EmptyFolder => std::fs::remove_dir(out).map_err(|_| appeared())?,
+            Existing::Dataset => {
+                recognise_dataset(out).map_err(|_| appeared())?;
+                let name = out.file_name().map_or("dataset".into(), |n| n.to_string_lossy());
+                let old =
+                    self.path.with_file_name(format!(".{name}.replaced-{}", std::process::id()));
+                std::fs::rename(out, &old).map_err(|e| io_err("cannot move aside", out, e))?;
+                aside = Some(old);
             }
         }
-        std::fs::rename(&self.path, out).map_err(|e| io_err("cannot rename into", out, e))?;
+        if let Err(e) = std::fs::rename(&self.path, out) {
+            if let Some(old) = &aside {
+                let _ = std::fs::rename(old, out);
+            }
+            return Err(io_err("cannot rename into", out, e));
+        }
         self.committed = true;
-        if let Some(old) = old {
-            std::fs::remove_dir_all(&old).map_err(|e| io_err("cannot remove", &old, e))?;
+        if let Some(old) = aside {
+            std::fs::remove_dir_all(&old).map_err(|e| {
+                ExportError::Io(format!(
+                    "the dataset is written to {}, but the one it replaced could not be removed \
+                     from {}: {e}",
+                    out.display(),
+                    old.display()
+                ))
+            })?;
         }
         Ok(())
     }
@@ -569,6 +785,9 @@ impl Drop for TempDir {
     fn drop(&mut self) {
         if !self.committed {
             let _ = std::fs::remove_dir_all(&self.path);
+            for d in &self.created {
+                let _ = std::fs::remove_dir(d);
+            }
         }
     }
 }
