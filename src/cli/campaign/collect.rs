@@ -4,6 +4,12 @@
 //! e_r in degrees) and the same of the run's own estimates with the ground-truth mesh (`gt_*`,
 //! the baseline; equal to the first set when the case decimates nothing). Also the paper's plots
 //! (see [`super::plots`]) under DIR/plots/, and a Markdown table on stdout.
+//!
+//! Nothing is taken on trust: a `result.json` is read only if it is a regular file (not a link,
+//! device or FIFO) of at most [`store::MAX_RESULT_BYTES`], and only if every value in it is one
+//! the campaign writes (a known status, counts that are whole and non-negative, errors that are
+//! finite and in range). Anything else makes the case `corrupt`, with the reason in the
+//! `problem` column and on stderr, and none of its values reach the table.
 
 use super::manifest::{case_id, key_names};
 use super::store::{self, write_atomic};
@@ -28,8 +34,10 @@ pub const METRICS: [&str; 8] = [
 pub struct Row {
     pub index: usize,
     pub id: String,
-    /// ok, failed or missing (not played yet).
+    /// ok, failed, missing (not played yet) or corrupt (a result that cannot be trusted).
     pub status: String,
+    /// Why a corrupt result is corrupt.
+    pub problem: Option<String>,
     pub definition: Value,
     pub varied: Vec<String>,
     /// The estimator's metrics (eval.json) and the ground-truth-mesh baseline (eval-gt.json).
@@ -60,17 +68,120 @@ impl Row {
     }
 }
 
+/// Exit code of `collect` when it wrote the table but some results are corrupt.
+pub const CORRUPT_RESULTS: u8 = 1;
+
+/// Why `v` is not a metrics object as `hitl eval --json` writes it.
+fn metrics_problem(v: Option<&Value>) -> Option<String> {
+    let Some(m) = v.and_then(Value::as_object) else {
+        return Some("no metrics object".into());
+    };
+    let count = |k: &str| match m.get(k) {
+        Some(x) => x.as_u64().ok_or_else(|| format!("{k} = {x} is not a whole number >= 0")),
+        None => Err(format!("no {k}")),
+    };
+    let frames = match count("frames") {
+        Ok(n) => n,
+        Err(e) => return Some(e),
+    };
+    match count("failures") {
+        Ok(f) if f > frames => return Some(format!("failures = {f} > frames = {frames}")),
+        Ok(_) => {}
+        Err(e) => return Some(e),
+    }
+    for k in &METRICS[2..] {
+        let max = if k.ends_with("_deg") { 180.0 } else { f64::INFINITY };
+        match m.get(*k) {
+            None | Some(Value::Null) => {}
+            Some(x) => match x.as_f64() {
+                Some(f) if f.is_finite() && (0.0..=max).contains(&f) => {}
+                _ => return Some(format!("{k} = {x} is out of range (0 to {max})")),
+            },
+        }
+    }
+    if let Some(x) = m.get("mesh_faces").filter(|x| !x.is_null() && x.as_u64().is_none()) {
+        return Some(format!("mesh_faces = {x} is not a whole number >= 0"));
+    }
+    None
+}
+
+/// The status of a parsed `result.json` of case `id`, or why it cannot be trusted.
+pub(super) fn check_result(r: &Value, id: &str, definition: &Value) -> Result<String, String> {
+    if !r.is_object() {
+        return Err("not a JSON object".into());
+    }
+    if r.get("id").and_then(Value::as_str) != Some(id) || r.get("definition") != Some(definition) {
+        return Err("made for another case (its id or definition differ)".into());
+    }
+    let status = match r.get("status") {
+        Some(Value::String(s)) if s == "ok" || s == "failed" => s.clone(),
+        Some(x) => return Err(format!("unknown status {x} (ok or failed)")),
+        None => return Err("no status".into()),
+    };
+    if status == "ok" {
+        if let Some(why) = metrics_problem(r.get("metrics")) {
+            return Err(format!("metrics: {why}"));
+        }
+        if let Some(why) = metrics_problem(r.get("baseline")) {
+            return Err(format!("baseline: {why}"));
+        }
+    } else {
+        if !r.get("failed_stage").is_some_and(Value::is_string) {
+            return Err("a failed case without its failed_stage".into());
+        }
+        if let Some(x) = r.get("exit_code").filter(|x| !x.is_null() && x.as_i64().is_none()) {
+            return Err(format!("exit_code = {x} is not an integer"));
+        }
+    }
+    if let Some(x) = r.get("wall_s") {
+        if !x.as_f64().is_some_and(|w| w.is_finite() && w >= 0.0) {
+            return Err(format!("wall_s = {x} is not a duration"));
+        }
+    }
+    match r.get("planned_sun_phase_deg") {
+        None | Some(Value::Null) => {}
+        Some(Value::Array(a))
+            if a.len() == 2 && a.iter().all(|x| x.as_f64().is_some_and(f64::is_finite)) => {}
+        Some(x) => return Err(format!("planned_sun_phase_deg = {x} is not [min, max]")),
+    }
+    if let Some(x) = r.get("arc_deg").filter(|x| !x.is_null() && !x.is_string()) {
+        return Err(format!("arc_deg = {x} is not \"FROM:TO\""));
+    }
+    Ok(status)
+}
+
+/// A case's result as collect takes it: (status, the result if trusted, why not).
+fn read_case(dir: &Path, id: &str, definition: &Value) -> (String, Option<Value>, Option<String>) {
+    let corrupt = |why: String| ("corrupt".to_string(), None, Some(why));
+    let bytes = match store::read_regular(&store::result_path(dir, id), store::MAX_RESULT_BYTES) {
+        Ok(b) => b,
+        Err(e) if e.kind() == std::io::ErrorKind::NotFound => {
+            return ("missing".into(), None, None)
+        }
+        Err(e) => return corrupt(format!("result.json: {e}")),
+    };
+    let r: Value = match serde_json::from_slice(&bytes) {
+        Ok(r) => r,
+        Err(e) => return corrupt(format!("result.json is not JSON (truncated?): {e}")),
+    };
+    match check_result(&r, id, definition) {
+        Ok(status) => (status, Some(r), None),
+        Err(why) => corrupt(format!("result.json: {why}")),
+    }
+}
+
 /// Read the folder's cases and their results.
 pub fn rows(dir: &Path) -> Result<Vec<Row>, String> {
     let index_path = dir.join("cases.json");
-    let text = std::fs::read_to_string(&index_path).map_err(|e| {
+    let bytes = store::read_regular(&index_path, store::MAX_INDEX_BYTES).map_err(|e| {
         format!(
             "{}: {e} (not a campaign folder: run `hitl campaign run M.toml --out DIR` first)",
             index_path.display()
         )
     })?;
     let index: Value =
-        serde_json::from_str(&text).map_err(|e| format!("{}: {e}", index_path.display()))?;
+        serde_json::from_slice(&bytes).map_err(|e| format!("{}: {e}", index_path.display()))?;
+    drop(bytes);
     let varied: Vec<String> = index
         .get("varied")
         .and_then(Value::as_array)
@@ -90,17 +201,12 @@ pub fn rows(dir: &Path) -> Result<Vec<Row>, String> {
                 index_path.display()
             ));
         }
-        let result =
-            store::read_result(dir, &id).filter(|r| r.get("definition") == Some(&definition));
-        let status = result
-            .as_ref()
-            .and_then(|r| r.get("status").and_then(Value::as_str))
-            .unwrap_or("missing")
-            .to_string();
+        let (status, result, problem) = read_case(dir, &id, &definition);
         rows.push(Row {
             index: c.get("index").and_then(Value::as_u64).unwrap_or(rows.len() as u64) as usize,
             id,
             status,
+            problem,
             definition,
             varied: varied.clone(),
             metrics: result
@@ -147,6 +253,7 @@ pub fn csv(rows: &[Row]) -> String {
             "wall_s",
             "failed_stage",
             "exit_code",
+            "problem",
         ]
         .map(String::from),
     );
@@ -175,6 +282,7 @@ pub fn csv(rows: &[Row]) -> String {
         cells.push(res("wall_s"));
         cells.push(res("failed_stage"));
         cells.push(res("exit_code"));
+        cells.push(r.problem.clone().unwrap_or_default());
         out.push_str(&cells.iter().map(|c| field(c)).collect::<Vec<_>>().join(","));
         out.push('\n');
     }
@@ -252,25 +360,40 @@ pub fn run(dir: &Path) -> u8 {
         return exit::BAD_INPUT;
     }
     crate::out!("{}", markdown(&rows));
-    let ok = rows.iter().filter(|r| r.status == "ok").count();
+    let count = |s: &str| rows.iter().filter(|r| r.status == s).count();
+    let corrupt = count("corrupt");
     crate::outln!(
-        "{} cases: {ok} ok, {} failed, {} not played -> {}",
+        "{} cases: {} ok, {} failed, {} not played, {corrupt} corrupt -> {}",
         rows.len(),
-        rows.iter().filter(|r| r.status == "failed").count(),
-        rows.iter().filter(|r| r.status == "missing").count(),
+        count("ok"),
+        count("failed"),
+        count("missing"),
         csv_path.display()
     );
+    for r in rows.iter().filter(|r| r.status == "corrupt") {
+        crate::errln!(
+            "hitl campaign collect: case {} [{}] is corrupt: {} (its row is empty; `hitl \
+             campaign run` plays it again)",
+            r.index,
+            r.id,
+            r.problem.as_deref().unwrap_or("?")
+        );
+    }
     match super::plots::write_all(&rows, &dir.join("plots")) {
         Ok(files) => {
             for f in files {
                 crate::outln!("wrote {}", f.display());
             }
-            exit::OK
         }
         Err(e) => {
             crate::errln!("hitl campaign collect: plots: {e}");
-            exit::BAD_INPUT
+            return exit::BAD_INPUT;
         }
+    }
+    if corrupt > 0 {
+        CORRUPT_RESULTS
+    } else {
+        exit::OK
     }
 }
 
