@@ -2,7 +2,9 @@
 //! through the loop, the interlocks and the recorder against a hidden true lab
 //! (calib/tests/data/true-lab.toml), the lab recovered within the bounds; then the
 //! refusals judged on that same recording with `--from-recording`, so one run of motion (about
-//! 100 s) serves every case. In a file of its own: test binaries run one after another, so the run
+//! 100 s) serves every case: every row of docs/calibration.md's table that applies to
+//! `--from-recording` (copies of the recording made unsolvable, cut short or damaged give the
+//! rows the recording itself cannot). In a file of its own: test binaries run one after another, so the run
 //! does not share the machine with other end-to-end tests.
 
 use hitl_trajectories::lab::LabConfig;
@@ -35,6 +37,20 @@ fn board_with_first_id(dir: &Path, first_id: u32) -> PathBuf {
     std::fs::write(&path, text.replace("first_id = 0\n", &format!("first_id = {first_id}\n")))
         .expect("write board");
     path
+}
+
+/// `src` written again to `dst` message by message, each message's bytes as `f(topic, data)`
+/// gives them (the metadata is not copied: calibrate does not read it).
+fn rewrite(src: &Path, dst: &Path, mut f: impl FnMut(&str, &[u8]) -> Vec<u8>) {
+    let bytes = std::fs::read(src).expect("read the recording");
+    let out = std::io::BufWriter::new(std::fs::File::create(dst).expect("create"));
+    let mut w = mcap::Writer::new(out).expect("writer");
+    for m in mcap::MessageStream::new(&bytes).expect("stream") {
+        let m = m.expect("message");
+        let data = f(&m.channel.topic, &m.data);
+        w.write(&mcap::Message { data: data.into(), ..m }).expect("write");
+    }
+    w.finish().expect("finish");
 }
 
 #[test]
@@ -122,11 +138,11 @@ fn calibrate_recovers_the_hidden_lab_and_refuses_what_it_cannot_solve() {
 
     // Refusals, each with its own exit code and reason; none writes the output.
     let refused = dir.path().join("refused.toml");
-    let solve = |extra: &[&std::ffi::OsStr]| {
+    let solve_file = |rec: &Path, extra: &[&std::ffi::OsStr]| {
         let o = hitl()
             .arg("calibrate")
             .arg("--from-recording")
-            .arg(&record)
+            .arg(rec)
             .arg("--out")
             .arg(&refused)
             .args(extra)
@@ -134,6 +150,7 @@ fn calibrate_recovers_the_hidden_lab_and_refuses_what_it_cannot_solve() {
             .expect("runs");
         (o.status.code(), text(&o))
     };
+    let solve = |extra: &[&std::ffi::OsStr]| solve_file(&record, extra);
     // Residuals worse than accepted (as noisy corners give): exit 3, with the remedy.
     let (code, all) = solve(&["--max-rms-px".as_ref(), "0.01".as_ref()]);
     assert_eq!(code, Some(3), "{all}");
@@ -149,6 +166,48 @@ fn calibrate_recovers_the_hidden_lab_and_refuses_what_it_cannot_solve() {
     let (code, all) = solve(&["--board".as_ref(), b.as_os_str()]);
     assert_eq!(code, Some(11), "{all}");
     assert!(all.contains("seen whole"), "{all}");
+    assert!(!refused.exists(), "a refusal wrote {}", refused.display());
+
+    // Every capture the first one again (same image, same flange pose): the camera never turns,
+    // poor conditioning, exit 3.
+    let same = dir.path().join("same-view.mcap");
+    let mut first: Option<Vec<u8>> = None;
+    rewrite(&record, &same, |topic, data| match topic {
+        "/camera/color" => first.get_or_insert_with(|| data.to_vec()).clone(),
+        _ => data.to_vec(),
+    });
+    let (code, all) = solve_file(&same, &[]);
+    assert_eq!(code, Some(3), "{all}");
+    assert!(all.contains("about one axis only"), "{all}");
+    // The board blanked out of all but 6 captures: detected in fewer than 10 views, exit 10.
+    let blank = dir.path().join("blanked.mcap");
+    let mut seen = 0;
+    rewrite(&record, &blank, |topic, data| {
+        if topic != "/camera/color" {
+            return data.to_vec();
+        }
+        seen += 1;
+        let mut img =
+            <foxglove::messages::RawImage as prost::Message>::decode(data).expect("image");
+        if seen > 6 {
+            img.data = vec![0u8; img.data.len()].into();
+        }
+        prost::Message::encode_to_vec(&img)
+    });
+    let (code, all) = solve_file(&blank, &[]);
+    assert_eq!(code, Some(10), "{all}");
+    assert!(all.contains("detected in only 6 of 15"), "{all}");
+    // Cut short at three quarters (a crash): fewer captures than a live calibration plans, and
+    // it says the file was not read to its end: exit 10.
+    let cut = dir.path().join("cut.mcap");
+    let bytes = std::fs::read(&record).expect("read");
+    std::fs::write(&cut, &bytes[..bytes.len() * 3 / 4]).expect("write");
+    let (code, all) = solve_file(&cut, &[]);
+    assert_eq!(code, Some(10), "{all}");
+    assert!(
+        all.contains("not read to its end") && all.contains("fewer than the 15 views"),
+        "{all}"
+    );
     assert!(!refused.exists(), "a refusal wrote {}", refused.display());
 
     // Not a recording: bad input, exit 2.
