@@ -2,11 +2,15 @@
 //!
 //! - [`manifest`]: the TOML manifest, its cases and their ids;
 //! - [`run`]: `hitl campaign run`, every case as plan, SITL run and eval child processes;
+//! - [`child`]: those children, in process groups of their own, ended with the campaign;
+//! - [`check`]: manifest values checked by the parsers of the flags they become;
 //! - [`store`]: the campaign folder, atomic writes, which cases are done;
 //! - [`collect`]: `hitl campaign collect`, results.csv; [`plots`]: its SVG plots;
 //! - [`slurm`]: `hitl campaign slurm`, an sbatch job array with one task per case;
 //! - [`phase`]: a Sun phase window turned into the arc `hitl plan --arc` plays.
 
+pub mod check;
+pub mod child;
 pub mod collect;
 pub mod manifest;
 pub mod phase;
@@ -82,22 +86,23 @@ pub struct SlurmArgs {
     /// Also submit the script with sbatch.
     #[arg(long)]
     pub submit: bool,
-    /// Most array tasks running at once (the `%LIMIT` of `--array`).
+    /// Most array tasks running at once (the `%LIMIT` of `--array`; at least 1).
     #[arg(long, value_name = "N", default_value_t = 16)]
-    pub limit: usize,
+    pub limit: u64,
     /// CPUs per task (a run's loop, renderer and estimator: 2 keeps the loop a core).
     #[arg(long, value_name = "N", default_value_t = 2)]
-    pub cpus_per_task: usize,
-    /// Memory per task, e.g. 4G.
+    pub cpus_per_task: u64,
+    /// Memory per task: a whole number with an optional unit K, M, G or T, e.g. 4G.
     #[arg(long, value_name = "SIZE", default_value = "4G")]
     pub mem: String,
-    /// Time limit per task in minutes (default: from the longest case's duration).
+    /// Time limit per task in minutes, 1 to 525600 (365 days; default: from the longest case's
+    /// duration).
     #[arg(long, value_name = "MIN")]
     pub time_min: Option<u64>,
-    /// Slurm partition.
+    /// Slurm partition (letters, digits and _.-; a comma-separated list of them).
     #[arg(long, value_name = "NAME")]
     pub partition: Option<String>,
-    /// Slurm account.
+    /// Slurm account (letters, digits and _.-).
     #[arg(long, value_name = "NAME")]
     pub account: Option<String>,
     /// Folder of the shared libraries hitl loads (MuJoCo, ONNX Runtime, Orbbec SDK); default:
@@ -121,14 +126,15 @@ pub fn run(args: CampaignArgs) -> u8 {
 
 /// The manifest and its text, or the exit code after saying why not.
 pub fn load(path: &std::path::Path) -> Result<(manifest::Manifest, String), u8> {
-    let text = std::fs::read_to_string(path).map_err(|e| {
-        crate::errln!("hitl campaign: {}: {e}", path.display());
-        exit::BAD_INPUT
-    })?;
-    let m = manifest::load(path).map_err(|e| {
+    let refuse = |e: String| {
         crate::errln!("hitl campaign: {e}");
         exit::BAD_INPUT
-    })?;
+    };
+    let bytes = store::read_capped(path, manifest::MAX_MANIFEST_BYTES)
+        .map_err(|e| refuse(format!("{}: {e}", path.display())))?;
+    let text = String::from_utf8(bytes)
+        .map_err(|_| refuse(format!("{}: not UTF-8 text", path.display())))?;
+    let m = manifest::load_text(path, &text).map_err(|e| refuse(e.to_string()))?;
     Ok((m, text))
 }
 
@@ -163,8 +169,8 @@ fn list(a: &ListArgs) -> u8 {
         Ok(x) => x,
         Err(code) => return code,
     };
-    crate::outln!("campaign {}: {} cases", m.name, m.cases.len());
-    for c in &m.cases {
+    crate::outln!("campaign {}: {} cases", m.name, m.len());
+    for c in m.cases() {
         let what: Vec<String> = c.varied.iter().map(|k| format!("{k}={}", c.cell(k))).collect();
         crate::outln!("{:4}  {}  {}", c.index, c.id, what.join(" "));
     }

@@ -10,10 +10,11 @@ use super::phase;
 use super::store::{self, write_atomic};
 use hitl_trajectories::planner::DEFAULT_WAYPOINT_RATE_HZ;
 use serde_json::{json, Value};
+use std::io::{self, BufRead, Read, Write};
 use std::path::{Path, PathBuf};
 use std::process::{Command, Stdio};
 use std::sync::atomic::{AtomicBool, AtomicUsize, Ordering};
-use std::sync::{Arc, Mutex};
+use std::sync::Mutex;
 use std::time::Instant;
 
 /// Exit code of a campaign in which at least one case failed (each case's own exit code is in its
@@ -48,46 +49,111 @@ pub enum Outcome {
     Failed { stage: String, code: Option<i32> },
 }
 
+/// Exit code of a `campaign run` refused because another one holds the folder (or, with
+/// `--index`, the case): sysexits' EX_TEMPFAIL, "try again later".
+pub const FOLDER_BUSY: u8 = 75;
+
+/// Set by Ctrl-C: no new case or stage starts.
+static STOP: AtomicBool = AtomicBool::new(false);
+
 /// Play the cases; returns the exit code (0 all done, [`CASES_FAILED`], 130 interrupted, 2 bad
-/// `--index` or output folder).
+/// `--index` or output folder, [`FOLDER_BUSY`]).
 pub fn run(manifest: &Manifest, manifest_text: &str, opts: &RunOptions) -> u8 {
-    let selected: Vec<&Case> = match opts.index {
-        Some(i) => match manifest.cases.get(i) {
-            Some(c) => vec![c],
-            None => {
-                crate::errln!(
-                    "hitl campaign run: --index {i} is out of range: {} has {} cases (0-{})",
-                    manifest.path.display(),
-                    manifest.cases.len(),
-                    manifest.cases.len().saturating_sub(1)
-                );
-                return crate::exit::BAD_INPUT;
-            }
-        },
-        None => manifest.cases.iter().collect(),
+    let n = manifest.len();
+    let selected: Vec<usize> = match opts.index {
+        Some(i) if i < n => vec![i],
+        Some(i) => {
+            crate::errln!(
+                "hitl campaign run: --index {i} is out of range: {} has {n} cases (0-{})",
+                manifest.path.display(),
+                n.saturating_sub(1)
+            );
+            return crate::exit::BAD_INPUT;
+        }
+        None => (0..n).collect(),
     };
-    if let Err(e) = write_index(manifest, manifest_text, &opts.out) {
+    if let Err(e) = std::fs::create_dir_all(opts.out.join("cases")) {
         crate::errln!("hitl campaign run: {}: {e}", opts.out.display());
         return crate::exit::BAD_INPUT;
     }
-    let (done, todo): (Vec<&Case>, Vec<&Case>) =
-        selected.into_iter().partition(|c| store::is_done(&opts.out, c));
+    // A whole campaign holds its folder alone; array tasks (--index) share it with each other
+    // and each holds its case below.
+    let lock_path = store::folder_lock_path(&opts.out);
+    let _folder_lock = match store::try_lock(&lock_path, opts.index.is_none()) {
+        Ok(f) => f,
+        Err(store::LockError::Busy) => {
+            crate::errln!(
+                "hitl campaign run: {} is in use: another `hitl campaign run` is playing it (it \
+                 holds {}); nothing was changed. Wait for it to end, or give another --out",
+                opts.out.display(),
+                lock_path.display()
+            );
+            return FOLDER_BUSY;
+        }
+        Err(store::LockError::Io(e)) => {
+            crate::errln!("hitl campaign run: {}: {e}", lock_path.display());
+            return crate::exit::BAD_INPUT;
+        }
+    };
+    if let Err(e) = write_index(manifest, manifest_text, &opts.out, opts.index.is_some()) {
+        crate::errln!("hitl campaign run: {}: {e}", opts.out.display());
+        return crate::exit::BAD_INPUT;
+    }
+    // An array task holds its case: a second task with the same index is refused, not played
+    // twice into one folder.
+    let _case_lock = match (opts.index, opts.index.and_then(|i| manifest.case(i))) {
+        (Some(i), Some(case)) => match lock_case(&opts.out, &case) {
+            Ok(f) => Some(f),
+            Err(store::LockError::Busy) => {
+                crate::errln!(
+                    "hitl campaign run: case {i} [{}] is being played by another `hitl campaign \
+                     run --index {i}` on {}; nothing was changed",
+                    case.id,
+                    opts.out.display()
+                );
+                return FOLDER_BUSY;
+            }
+            Err(store::LockError::Io(e)) => {
+                crate::errln!("hitl campaign run: {}: {e}", opts.out.display());
+                return crate::exit::BAD_INPUT;
+            }
+        },
+        _ => None,
+    };
+    // Cases by index, built when played. The same case twice (two [[matrix]] tables may both
+    // hold it) is played once.
+    let mut ids = std::collections::HashSet::new();
+    let mut done = 0usize;
+    let mut todo: Vec<usize> = Vec::new();
+    for i in selected {
+        let Some(case) = manifest.case(i) else { continue };
+        if !ids.insert(case.id.clone()) {
+            continue;
+        }
+        if store::is_done(&opts.out, &case) {
+            done += 1;
+        } else {
+            todo.push(i);
+        }
+    }
+    drop(ids);
     crate::outln!(
         "campaign {}: {} cases, {} already done, {} to run, {} at a time -> {}",
         manifest.name,
-        done.len() + todo.len(),
-        done.len(),
+        done + todo.len(),
+        done,
         todo.len(),
         opts.jobs.min(todo.len()).max(1),
         opts.out.display()
     );
-    let stop = Arc::new(AtomicBool::new(false));
-    {
-        let stop = stop.clone();
-        // A second handler cannot be installed (tests calling this twice): then Ctrl-C simply
-        // ends the process as it would without one.
-        let _ = ctrlc::set_handler(move || stop.store(true, Ordering::SeqCst));
-    }
+    // Ctrl-C: no new case or stage starts, and the running stages get it too (they are in
+    // process groups of their own, which a terminal's Ctrl-C does not reach): `hitl run` makes
+    // its controlled stop. A second handler cannot be installed (tests calling this twice):
+    // then Ctrl-C ends the process, and its children follow (see [`super::child`]).
+    let _ = ctrlc::set_handler(|| {
+        STOP.store(true, Ordering::SeqCst);
+        super::child::interrupt_all();
+    });
     let bar = progress_bar(todo.len(), opts.plain);
     let next = AtomicUsize::new(0);
     let outcomes: Mutex<Vec<(usize, Outcome)>> = Mutex::new(Vec::new());
@@ -95,14 +161,14 @@ pub fn run(manifest: &Manifest, manifest_text: &str, opts: &RunOptions) -> u8 {
     std::thread::scope(|s| {
         for _ in 0..opts.jobs.clamp(1, todo.len().max(1)) {
             s.spawn(|| loop {
-                if stop.load(Ordering::SeqCst) {
+                if STOP.load(Ordering::SeqCst) {
                     break;
                 }
                 let k = next.fetch_add(1, Ordering::SeqCst);
-                let Some(case) = todo.get(k) else { break };
+                let Some(case) = todo.get(k).and_then(|&i| manifest.case(i)) else { break };
                 let started = Instant::now();
-                let outcome = play_case(case, &opts.out, &opts.exe);
-                let line = describe(case, &outcome, started.elapsed().as_secs_f64(), &opts.out);
+                let outcome = play_case(&case, &opts.out, &opts.exe);
+                let line = describe(&case, &outcome, started.elapsed().as_secs_f64(), &opts.out);
                 match &bar {
                     Some(b) => {
                         b.println(line);
@@ -128,12 +194,12 @@ pub fn run(manifest: &Manifest, manifest_text: &str, opts: &RunOptions) -> u8 {
         manifest.name,
         played,
         failed,
-        done.len(),
+        done,
         todo.len() - played,
         t0.elapsed().as_secs_f64(),
         opts.out.display()
     );
-    if stop.load(Ordering::SeqCst) {
+    if STOP.load(Ordering::SeqCst) {
         crate::errln!("hitl campaign run: interrupted; run it again to resume");
         130
     } else if failed > 0 {
@@ -141,6 +207,13 @@ pub fn run(manifest: &Manifest, manifest_text: &str, opts: &RunOptions) -> u8 {
     } else {
         crate::exit::OK
     }
+}
+
+/// Hold `case`'s lock (DIR/cases/<id>/case.lock), creating its folder.
+fn lock_case(out: &Path, case: &Case) -> Result<std::fs::File, store::LockError> {
+    let dir = store::case_dir(out, &case.id);
+    std::fs::create_dir_all(&dir).map_err(store::LockError::Io)?;
+    store::try_lock(&dir.join("case.lock"), true)
 }
 
 fn progress_bar(len: usize, plain: bool) -> Option<indicatif::ProgressBar> {
@@ -182,17 +255,56 @@ fn describe(case: &Case, outcome: &Outcome, secs: f64, out: &Path) -> String {
     }
 }
 
+/// The first line of a `cases.json` written for a manifest with this fingerprint.
+fn index_head(fingerprint: &str) -> String {
+    format!("{{\"fingerprint\":\"{fingerprint}\",")
+}
+
 /// DIR/manifest.toml and DIR/cases.json: what the folder's cases are (collect reads these).
-fn write_index(manifest: &Manifest, text: &str, out: &Path) -> std::io::Result<()> {
-    std::fs::create_dir_all(out.join("cases"))?;
+/// The index is streamed case by case (never the whole grid in memory) and starts with the
+/// manifest's fingerprint; an array task (`only_if_changed`) leaves an index with the same
+/// fingerprint as it is instead of writing every case again.
+fn write_index(
+    manifest: &Manifest,
+    text: &str,
+    out: &Path,
+    only_if_changed: bool,
+) -> io::Result<()> {
+    let head = index_head(&manifest.fingerprint());
+    let index = out.join("cases.json");
+    if only_if_changed {
+        let first = std::fs::File::open(&index).ok().and_then(|f| {
+            let mut line = String::new();
+            io::BufReader::new(f.take(4096)).read_line(&mut line).ok()?;
+            Some(line)
+        });
+        if first.is_some_and(|l| l.trim_end() == head) {
+            return Ok(());
+        }
+    }
     write_atomic(&out.join("manifest.toml"), text.as_bytes())?;
-    let cases: Vec<Value> = manifest
-        .cases
-        .iter()
-        .map(|c| json!({ "index": c.index, "id": c.id, "definition": c.definition() }))
-        .collect();
-    let index = json!({ "name": manifest.name, "varied": manifest.varied, "cases": cases });
-    write_atomic(&out.join("cases.json"), format!("{index:#}\n").as_bytes())
+    let tmp = store::temp_path(&index);
+    let write = || -> io::Result<()> {
+        let mut w = io::BufWriter::new(std::fs::File::create(&tmp)?);
+        writeln!(w, "{head}")?;
+        writeln!(w, "\"name\":{},", json!(manifest.name))?;
+        writeln!(w, "\"varied\":{},", json!(manifest.varied))?;
+        writeln!(w, "\"cases\":[")?;
+        for (k, c) in manifest.cases().enumerate() {
+            let sep = if k + 1 < manifest.len() { "," } else { "" };
+            let row = json!({ "index": c.index, "id": c.id, "definition": c.definition() });
+            writeln!(w, "{row}{sep}")?;
+        }
+        writeln!(w, "]}}")?;
+        let f = w.into_inner().map_err(io::IntoInnerError::into_error)?;
+        f.sync_all()?;
+        std::fs::rename(&tmp, &index)
+    };
+    let r = write();
+    if r.is_err() {
+        let _ = std::fs::remove_file(&tmp);
+    }
+    r
 }
 
 /// A stage that ended badly: its name, exit code (None: killed by a signal) and output tail.
@@ -203,6 +315,8 @@ struct StageFailure {
 }
 
 /// Run `exe ARGS` with stderr into `log` and stdout into `stdout` (or `log` too); Ok(()) on exit 0.
+/// The child runs in a process group of its own and ends with this process
+/// ([`super::child::run`]); a stage is not started once Ctrl-C was pressed.
 fn stage(
     exe: &Path,
     stage: &'static str,
@@ -215,6 +329,13 @@ fn stage(
         code,
         tail: format!("{extra}{}", store::tail(log, TAIL_CHARS)),
     };
+    if STOP.load(Ordering::SeqCst) {
+        return Err(StageFailure {
+            stage,
+            code: Some(i32::from(crate::exit::OPERATOR_STOP)),
+            tail: "not started: the campaign was interrupted (Ctrl-C)".into(),
+        });
+    }
     let err =
         std::fs::File::create(log).map_err(|e| fail(None, format!("{}: {e}\n", log.display())))?;
     let out = match stdout {
@@ -222,12 +343,9 @@ fn stage(
         None => err.try_clone(),
     }
     .map_err(|e| fail(None, format!("{e}\n")))?;
-    let status = Command::new(exe)
-        .args(args)
-        .stdin(Stdio::null())
-        .stdout(out)
-        .stderr(err)
-        .status()
+    let mut cmd = Command::new(exe);
+    cmd.args(args).stdin(Stdio::null()).stdout(out).stderr(err);
+    let status = super::child::run(cmd)
         .map_err(|e| fail(None, format!("cannot start {}: {e}\n", exe.display())))?;
     if status.success() {
         Ok(())
@@ -241,7 +359,7 @@ fn s(x: impl ToString) -> String {
 }
 
 /// `hitl plan` arguments of a case (the trajectory goes to `out`).
-fn plan_args(case: &Case, out: &Path) -> Result<(Vec<String>, Option<String>), String> {
+pub(super) fn plan_args(case: &Case, out: &Path) -> Result<(Vec<String>, Option<String>), String> {
     let preset = case.text("preset").unwrap_or("flyaround").to_string();
     let range = case.number("range_m").unwrap_or(10.0);
     let every = case.number("capture_every_s").unwrap_or(0.5);
@@ -276,7 +394,7 @@ fn plan_args(case: &Case, out: &Path) -> Result<(Vec<String>, Option<String>), S
 }
 
 /// `hitl run` arguments of a case.
-fn run_args(case: &Case, plan: &Path, record: &Path) -> Vec<String> {
+pub(super) fn run_args(case: &Case, plan: &Path, record: &Path) -> Vec<String> {
     let mut a = vec![
         s("run"),
         s(plan.display()),
@@ -320,20 +438,16 @@ fn eval_stage(
     json_out: &Path,
     log: &Path,
 ) -> Result<Value, StageFailure> {
-    let fail = |code: Option<i32>, tail: String| StageFailure { stage: name, code, tail };
-    let out = Command::new(exe)
-        .args(args)
-        .stdin(Stdio::null())
-        .output()
-        .map_err(|e| fail(None, format!("cannot start {}: {e}", exe.display())))?;
-    let _ = std::fs::write(log, &out.stderr);
-    if !out.status.success() {
-        return Err(fail(out.status.code(), store::tail(log, TAIL_CHARS)));
-    }
-    let v: Value = serde_json::from_slice(&out.stdout)
-        .map_err(|e| fail(None, format!("hitl eval printed no JSON object: {e}")))?;
+    let fail = |tail: String| StageFailure { stage: name, code: None, tail };
+    let tmp = store::temp_path(json_out);
+    stage(exe, name, args, log, Some(&tmp))?;
+    let bytes = store::read_regular(&tmp, store::MAX_RESULT_BYTES)
+        .map_err(|e| fail(format!("hitl eval's output {}: {e}", tmp.display())))?;
+    let _ = std::fs::remove_file(&tmp);
+    let v: Value = serde_json::from_slice(&bytes)
+        .map_err(|e| fail(format!("hitl eval printed no JSON object: {e}")))?;
     write_atomic(json_out, format!("{v}\n").as_bytes())
-        .map_err(|e| fail(None, format!("{}: {e}", json_out.display())))?;
+        .map_err(|e| fail(format!("{}: {e}", json_out.display())))?;
     Ok(v)
 }
 
@@ -346,7 +460,11 @@ pub fn play_case(case: &Case, out: &Path, exe: &Path) -> Outcome {
         "index": case.index,
         "definition": case.definition(),
     });
-    let outcome = match play_stages(case, &dir, exe, &mut result) {
+    let outcome = play_stages(case, &dir, exe, &mut result);
+    // Whatever ended the case, no temporary file of it stays behind (this process is the only
+    // writer of the case's folder: see the locks in `run`).
+    store::remove_stale_temps(&dir);
+    let outcome = match outcome {
         Ok(()) => {
             result["status"] = json!("ok");
             Outcome::Ok

@@ -1,0 +1,79 @@
+//! A campaign's child processes (`hitl plan`, `hitl run`, `hitl eval`) never outlive it, and the
+//! campaign alone decides when they stop:
+//!
+//! - each child runs in a process group of its own, so a terminal's Ctrl-C reaches the campaign
+//!   only, and the campaign hands it on ([`interrupt_all`]) to every child it is waiting for;
+//! - each child asks the kernel for SIGINT when the campaign dies (`PR_SET_PDEATHSIG`), however
+//!   it dies (`kill -9` included): `hitl run` then makes the controlled stop Ctrl-C makes (its
+//!   handler is for SIGINT; SIGTERM would end it on the spot), `hitl plan` and `hitl eval` end;
+//! - the children's pids are known only while they can be signalled: a child is reaped and
+//!   removed under the same lock [`interrupt_all`] signals under, so a reused pid is never hit.
+
+#![allow(unsafe_code)]
+
+use std::io;
+use std::os::unix::process::CommandExt;
+use std::process::{Command, ExitStatus};
+use std::sync::{Mutex, PoisonError};
+use std::time::Duration;
+
+/// The children being waited for (each leads its own process group).
+static CHILDREN: Mutex<Vec<u32>> = Mutex::new(Vec::new());
+
+/// How often a waiting thread looks whether its child ended.
+const POLL: Duration = Duration::from_millis(50);
+
+/// Start `cmd` in a process group of its own, bound to end with this process, and wait for it.
+pub fn run(mut cmd: Command) -> io::Result<ExitStatus> {
+    let parent = std::process::id() as libc::pid_t;
+    cmd.process_group(0);
+    // SAFETY: the closure runs in the child between fork and exec, where only async-signal-safe
+    // calls are allowed: it calls prctl(2) and getppid(2), both async-signal-safe, touches no
+    // lock and allocates nothing (`last_os_error` and `from_raw_os_error` only wrap an errno).
+    // PR_SET_PDEATHSIG fires when the thread that forked the child ends; that thread is the one
+    // waiting for the child below, which lives until the child has ended (or the process dies).
+    unsafe {
+        cmd.pre_exec(move || {
+            if libc::prctl(libc::PR_SET_PDEATHSIG, libc::SIGINT as libc::c_ulong) != 0 {
+                return Err(io::Error::last_os_error());
+            }
+            // The campaign died before the request took effect: its signal will never come.
+            if libc::getppid() != parent {
+                return Err(io::Error::from_raw_os_error(libc::ESRCH));
+            }
+            Ok(())
+        });
+    }
+    let mut child = {
+        let mut list = CHILDREN.lock().unwrap_or_else(PoisonError::into_inner);
+        let child = cmd.spawn()?;
+        list.push(child.id());
+        child
+    };
+    loop {
+        {
+            let mut list = CHILDREN.lock().unwrap_or_else(PoisonError::into_inner);
+            let ended = child.try_wait();
+            if !matches!(ended, Ok(None)) {
+                list.retain(|&p| p != child.id());
+            }
+            if let Some(status) = ended? {
+                return Ok(status);
+            }
+        }
+        std::thread::sleep(POLL);
+    }
+}
+
+/// Hand SIGINT to every running child's process group (Ctrl-C on the campaign).
+pub fn interrupt_all() {
+    let list = CHILDREN.lock().unwrap_or_else(PoisonError::into_inner);
+    for &pid in list.iter() {
+        // SAFETY: kill(2) takes plain integers; `pid` is a child not yet reaped (removed from
+        // the list under this lock before `try_wait` returns its status), so its group id is
+        // still its own and not reused.
+        unsafe {
+            libc::kill(-(pid as libc::pid_t), libc::SIGINT);
+        }
+    }
+}
