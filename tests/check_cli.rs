@@ -88,6 +88,11 @@ save("too_fast.npz", qpos=qf, t=tf)
 # jerk-limited stop from there stays under 1 rad/s, so the lead-out breaks the velocity limit.
 qh = np.tile(LOOK, (len(tf), 1)); qh[:, 6] += -0.26667 * tf ** 3 + 0.425 * tf ** 4
 save("hot_end.npz", qpos=qh, t=tf)
+# 2 s of slow motion with a capture at every waypoint: 25 Hz (every 40 ms) and 10 Hz (100 ms).
+for name, dt in (("captures_25hz.npz", 0.04), ("captures_10hz.npz", 0.1)):
+    tk = np.arange(int(round(2.0 / dt)) + 1) * dt
+    qk = np.tile(LOOK, (len(tk), 1)); qk[:, 0] += 0.05 * np.sin(np.pi * tk / 2.0) ** 2
+    save(name, qpos=qk, t=tk, capture=np.ones(len(tk), dtype=bool))
 "#;
 
 fn python() -> PathBuf {
@@ -262,6 +267,47 @@ fn a_tcp_faster_than_the_lab_allows_is_unsafe() {
     let peak = v["tcp_speed"]["peak_m_s"].as_f64().expect("peak");
     assert!(peak > 0.01 && peak < 1.0, "{v}");
     assert_eq!(v["tcp_speed"]["limit_m_s"], 1.0);
+}
+
+#[test]
+fn a_tcp_speed_refusal_proposes_a_speed_scale_that_passes() {
+    let cfg = fixtures().join("slowish_tcp.toml");
+    std::fs::write(&cfg, "[limits]\ntcp_speed_m_s = 0.02\n").expect("write");
+    let cfg = cfg.display().to_string();
+    let o = check("safe.npz", &["--config", &cfg]);
+    assert_eq!(o.code, 3, "{}", o.text);
+    let scale = remedy(&o.text).to_string();
+    expect("safe.npz", &["--config", &cfg, "--speed-scale", &scale], 0, &["SAFE"]);
+}
+
+#[test]
+fn captures_faster_than_half_the_orbbecs_frame_rate_are_refused_by_check_and_run() {
+    // Without --camera, no camera rule: the 25 Hz file is SAFE.
+    expect("captures_25hz.npz", &[], 0, &["SAFE"]);
+    let o = check("captures_25hz.npz", &["--camera", "orbbec"]);
+    assert_eq!(o.code, 3, "{}", o.text);
+    for w in ["25.0 Hz", "15.0 Hz", "30 fps", "capture less often"] {
+        assert!(o.text.contains(w), "{w}: {}", o.text);
+    }
+    // 15/25 = 0.6 by the scaling law; captures fall on whole ticks, so a little less passes.
+    let s = remedy(&o.text);
+    let scale = s.to_string();
+    assert!((0.55..=0.6).contains(&s), "{s}");
+    expect("captures_25hz.npz", &["--camera", "orbbec", "--speed-scale", &scale], 0, &["SAFE"]);
+    expect("captures_10hz.npz", &["--camera", "orbbec"], 0, &["SAFE", "capture rate"]);
+    // `hitl run` refuses it with exit 3 before the camera is opened: no camera is attached
+    // here, so opening it would have been exit 5.
+    let file = fixtures().join("captures_25hz.npz");
+    let out = Command::new(env!("CARGO_BIN_EXE_hitl"))
+        .arg("run")
+        .arg(&file)
+        .args(["--camera", "orbbec:software", "--light", "none", "--plain"])
+        .stdin(std::process::Stdio::null())
+        .output()
+        .expect("run hitl");
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert_eq!(out.status.code(), Some(3), "{err}");
+    assert!(err.contains("25.0 Hz") && err.contains("nothing moved"), "{err}");
 }
 
 #[test]

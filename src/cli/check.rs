@@ -6,6 +6,7 @@
 //! 2 bad file, flags or config. `hitl run` applies the same rules before anything moves.
 
 use crate::control::motion::{add_ramps, MotionError};
+use crate::devices::CameraSpec;
 use crate::exit;
 use hitl_trajectories::lab::LabConfig;
 use hitl_trajectories::npz::{self, Loaded};
@@ -37,6 +38,11 @@ pub struct CheckArgs {
     /// seconds. Refused for a file that has `t`.
     #[arg(long, value_name = "HZ")]
     pub waypoint_rate: Option<f64>,
+    /// Check the captures against this camera too (as `hitl run --camera`): an Orbbec camera
+    /// follows captures at most at half its stream's frame rate (15 Hz at 30 fps), so faster
+    /// captures are refused with a --speed-scale remedy. Without it, no camera rule applies.
+    #[arg(long, value_name = "sim|orbbec[:hardware|:software]|none")]
+    pub camera: Option<CameraSpec>,
     /// Print one JSON object (the full report, or an `error`) instead of the human report.
     #[arg(long)]
     pub json: bool,
@@ -82,12 +88,16 @@ fn table_and_report(
     lab: &LabConfig,
     rate_hz: f64,
     speed_scale: f64,
+    camera: Option<CameraSpec>,
 ) -> Result<(SetpointTable, PreflightReport), CheckError> {
     let table = SetpointTable::build(traj, rate_hz, speed_scale)
         .map_err(|source| CheckError::Timing { path: path.to_string(), source })?;
     let table = add_ramps(table, lab)
         .map_err(|source| CheckError::Ramp { path: path.to_string(), source })?;
-    let report = preflight::check(traj, &table, lab);
+    let mut report = preflight::check(traj, &table, lab);
+    if let Some((limit_hz, why)) = camera.and_then(crate::devices::camera::capture_limit) {
+        preflight::check_capture_rate(&mut report, &table, limit_hz, &why);
+    }
     Ok((table, report))
 }
 
@@ -110,6 +120,7 @@ fn confirm_speed_scale(
     traj: &hitl_trajectories::Trajectory,
     lab: &LabConfig,
     rate_hz: f64,
+    camera: Option<CameraSpec>,
     exact: f64,
 ) -> Option<f64> {
     let mut s = floor_4_digits(exact);
@@ -117,7 +128,7 @@ fn confirm_speed_scale(
         if s.is_nan() || s <= 0.0 {
             return None;
         }
-        match table_and_report(path, traj, lab, rate_hz, s) {
+        match table_and_report(path, traj, lab, rate_hz, s, camera) {
             Ok((_, report)) if report.is_safe() => return Some(s),
             Ok(_) => s = floor_4_digits(s * if attempt < 20 { 0.999 } else { 0.99 }),
             Err(_) => return None,
@@ -127,28 +138,40 @@ fn confirm_speed_scale(
 }
 
 /// Load `traj` (a file without `t` at `waypoint_rate_hz`), build its setpoint table at `rate_hz`
-/// and `speed_scale` with its ramps, run the preflight, and for a file refused only for
-/// scalable limits find the speed scale that passes.
+/// and `speed_scale` with its ramps, run the preflight (the captures against `camera`'s rate
+/// when one is named), and for a file refused only for scalable limits find the speed scale that
+/// passes.
 pub fn load_and_check(
     traj: &Path,
     lab: &LabConfig,
     rate_hz: f64,
     speed_scale: f64,
     waypoint_rate_hz: Option<f64>,
+    camera: Option<CameraSpec>,
 ) -> Result<Checked, CheckError> {
     let path = traj.display().to_string();
     let options = npz::LoadOptions { waypoint_rate_hz };
     let loaded = npz::load_with(traj, &options)
         .map_err(|source| CheckError::Trajectory { path: path.clone(), source })?;
-    let (table, report) = table_and_report(&path, &loaded.trajectory, lab, rate_hz, speed_scale)?;
-    let speed_scale_to_pass = preflight::speed_scale_to_pass(&table, &report, lab)
-        .and_then(|exact| confirm_speed_scale(&path, &loaded.trajectory, lab, rate_hz, exact));
+    let (table, report) =
+        table_and_report(&path, &loaded.trajectory, lab, rate_hz, speed_scale, camera)?;
+    let speed_scale_to_pass =
+        preflight::speed_scale_to_pass(&table, &report, lab).and_then(|exact| {
+            confirm_speed_scale(&path, &loaded.trajectory, lab, rate_hz, camera, exact)
+        });
     Ok(Checked { loaded, table, report, speed_scale_to_pass })
 }
 
 pub fn run(args: CheckArgs) -> u8 {
     let checked = load_lab(args.config.as_deref()).and_then(|lab| {
-        load_and_check(&args.traj, &lab, args.rate, args.speed_scale, args.waypoint_rate)
+        load_and_check(
+            &args.traj,
+            &lab,
+            args.rate,
+            args.speed_scale,
+            args.waypoint_rate,
+            args.camera,
+        )
     });
     let checked = match checked {
         Ok(c) => c,
@@ -277,15 +300,22 @@ fn human(path: &Path, c: &Checked) -> String {
         "  TCP linear speed       {:>8.3}  {:>8.3}  {:<9}  {:.3} s (tick {})  [m/s]",
         t.peak_m_s, t.limit_m_s, t.point, t.time_s, t.tick
     );
+    if let Some(c) = &r.capture_rate {
+        let _ = writeln!(
+            s,
+            "  capture rate           {:>8.3}  {:>8.3}  camera     {:.3} s (tick {})  [Hz]",
+            c.peak_hz, c.limit_hz, c.time_s, c.tick
+        );
+    }
     for v in &r.violations {
         let _ = writeln!(s, "  VIOLATION: {}", v.message);
     }
     if let Some(scale) = c.speed_scale_to_pass {
         let _ = writeln!(
             s,
-            "  remedy: --speed-scale {scale} passes (from the scaling laws: velocity and step \
-             scale with it, acceleration with its square, jerk with its cube; rounded down to 4 \
-             digits and confirmed by a preflight at that value)"
+            "  remedy: --speed-scale {scale} passes (from the scaling laws: velocity, step, TCP \
+             speed and capture rate scale with it, acceleration with its square, jerk with its \
+             cube; rounded down to 4 digits and confirmed by a preflight at that value)"
         );
     }
     s

@@ -97,6 +97,21 @@ fn preset_intrinsics(preset: &str, size: Option<(u32, u32)>) -> Result<Intrinsic
     Ok(ORBBEC_STREAM)
 }
 
+/// The fastest capture rate the camera `spec` follows, Hz, with why, for the preflight's
+/// capture-rate rule; `None` for a camera without such a limit (the stub's renders every
+/// capture; none captures nothing). The Orbbec SDK needs trigger rate x frames per trigger below
+/// the stream's frame rate, and its own example keeps the trigger at most at half of it: half
+/// the frame rate the driver asks for first (its profiles' preferred rate, 30 fps).
+pub fn capture_limit(spec: CameraSpec) -> Option<(f64, String)> {
+    match spec {
+        CameraSpec::Orbbec(_) => {
+            let fps = f64::from(hitl_drivers::orbbec::profiles::PREFERRED_FPS[0]);
+            Some((fps / 2.0, format!("camera {spec} follows (half its {fps:.0} fps stream)")))
+        }
+        _ => None,
+    }
+}
+
 /// Refuse a camera that cannot be triggered with the devices chosen, before anything opens: a
 /// hardware-triggered Orbbec camera (the default) takes its frames on the trigger box's camera
 /// line, so without a trigger box (`--trigger trigger:DEV`, or `--light trigger:DEV` taking both

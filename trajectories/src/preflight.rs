@@ -88,6 +88,20 @@ pub struct TcpSpeed {
     pub limit_m_s: f64,
 }
 
+/// The captures' fastest rate against what the camera can follow.
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct CaptureRate {
+    /// Fastest capture rate, Hz: the inverse of the shortest gap between two captures.
+    pub peak_hz: f64,
+    /// The later capture of that gap: its tick and time.
+    pub tick: usize,
+    pub time_s: f64,
+    /// The fastest rate the camera follows, Hz.
+    pub limit_hz: f64,
+    /// The camera and why that is its limit, in words.
+    pub camera: String,
+}
+
 /// What a violation is about.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize)]
 #[serde(rename_all = "snake_case")]
@@ -101,6 +115,8 @@ pub enum Rule {
     Wall,
     KeepOut,
     CameraTargetDistance,
+    /// Captures faster than the camera can follow ([`check_capture_rate`]).
+    CaptureRate,
 }
 
 /// One broken rule, with where it is worst.
@@ -140,6 +156,10 @@ pub struct PreflightReport {
     pub joints: Vec<JointPeaks>,
     pub clearances: Vec<Clearance>,
     pub tcp_speed: TcpSpeed,
+    /// The captures' fastest rate against the camera's limit, when a camera was named
+    /// ([`check_capture_rate`]).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub capture_rate: Option<CaptureRate>,
     pub violations: Vec<Violation>,
     /// Things worth knowing that are not unsafe (e.g. two captures falling on one tick).
     pub warnings: Vec<String>,
@@ -452,6 +472,7 @@ pub fn check(traj: &Trajectory, table: &SetpointTable, lab: &LabConfig) -> Prefl
         joints,
         clearances,
         tcp_speed,
+        capture_rate: None,
         violations,
         warnings,
     }
@@ -459,15 +480,56 @@ pub fn check(traj: &Trajectory, table: &SetpointTable, lab: &LabConfig) -> Prefl
 
 /// Rules a slower playback always cures: per joint, velocity scales with the speed scale `s`,
 /// acceleration with `s^2`, jerk with `s^3` and the per-tick step with `s`.
-const SCALABLE: [Rule; 4] = [Rule::Velocity, Rule::Acceleration, Rule::Jerk, Rule::Step];
+const SCALABLE: [Rule; 6] =
+    [Rule::Velocity, Rule::Acceleration, Rule::Jerk, Rule::Step, Rule::TcpSpeed, Rule::CaptureRate];
+
+/// Refuse captures that come faster than the camera follows: `limit_hz` is the camera's
+/// (`camera` says which and why, for the message). Records the fastest rate in
+/// `report.capture_rate` and adds a [`Rule::CaptureRate`] violation when it is above the limit.
+/// The rate scales with the speed scale, so [`speed_scale_to_pass`] covers it.
+pub fn check_capture_rate(
+    report: &mut PreflightReport,
+    table: &SetpointTable,
+    limit_hz: f64,
+    camera: &str,
+) {
+    let gaps = table.captures.windows(2).map(|w| (w[1].tick.saturating_sub(w[0].tick), w[1]));
+    let Some((gap, at)) = gaps.filter(|(g, _)| *g > 0).min_by_key(|(g, _)| *g) else {
+        return;
+    };
+    let peak_hz = table.rate_hz / gap as f64;
+    let time_s = at.tick as f64 * table.dt;
+    report.capture_rate =
+        Some(CaptureRate { peak_hz, tick: at.tick, time_s, limit_hz, camera: camera.to_string() });
+    if peak_hz > limit_hz * (1.0 + 1e-9) {
+        report.violations.push(Violation {
+            rule: Rule::CaptureRate,
+            message: format!(
+                "captures come at up to {peak_hz:.1} Hz (every {:.1} ms, at {time_s:.3} s, \
+                 waypoint {}), faster than the {limit_hz:.1} Hz {camera}: capture less often \
+                 (hitl plan --capture-every) or slow the playback (--speed-scale)",
+                1e3 / peak_hz,
+                at.waypoint
+            ),
+            tick: at.tick,
+            time_s,
+            waypoint: at.waypoint,
+            joint: None,
+            surface: None,
+            capsule: None,
+        });
+        report.safe = false;
+    }
+}
 
 /// The largest speed scale at which the file's own ticks meet every scalable limit, when `report`
-/// (of `table`) refuses it for velocity, acceleration, jerk or step only; `None` when it is safe
-/// or refused for anything slowing down cannot be trusted to cure (limits, clearances, TCP).
+/// (of `table`) refuses it for velocity, acceleration, jerk, step, TCP speed or capture rate
+/// only; `None` when it is safe or refused for anything slowing down cannot be trusted to cure
+/// (joint limits, clearances).
 ///
 /// From the scaling laws, over the file's ticks (the lead-in and lead-out are planned within the
-/// limits at any scale): `s = time_scale * min_j min(v_max/v, sqrt(a_max/a), cbrt(j_max/j),
-/// step_max/step)`, `time_scale` being the one the table was built at. The value is exact for the
+/// limits at any scale): `s = time_scale * min(min_j min(v_max/v, sqrt(a_max/a), cbrt(j_max/j),
+/// step_max/step), tcp_max/tcp, capture_max/capture)`, `time_scale` being the one the table was built at. The value is exact for the
 /// continuous motion; ticks fall at other trajectory times once stretched, so the caller confirms
 /// it with a second preflight and steps down slightly when rounding fails it. Ramps do not follow
 /// the laws (they are planned within fixed limits from the scaled end state), so a violation in
@@ -501,6 +563,15 @@ pub fn speed_scale_to_pass(
             }
             factor = factor.min(r);
         }
+    }
+    // TCP speed and the capture rate scale with the speed scale as joint velocity does.
+    let tcp = &report.tcp_speed;
+    factor = factor.min(tcp.limit_m_s / tcp.peak_m_s);
+    if let Some(c) = &report.capture_rate {
+        factor = factor.min(c.limit_hz / c.peak_hz);
+    }
+    if factor.is_nan() {
+        return None;
     }
     // When only a ramp breaks a limit (an end still accelerating near the velocity limit: no
     // jerk-limited stop can avoid adding speed), the file's own bound is no bound: the caller's
@@ -656,5 +727,53 @@ mod tests {
         assert!(rules.contains(&Rule::CameraTargetDistance), "{rules:?}");
         let floor = r.clearances.iter().find(|c| c.surface == "floor").expect("floor");
         assert_ne!(floor.capsule, "base", "the base capsule is exempt from the floor");
+    }
+
+    #[test]
+    fn the_tcp_speed_has_a_speed_scale_remedy() {
+        // The motion of the TCP test, refused for TCP speed alone.
+        let mut traj = comfortable(3, 0.5, 0.0);
+        traj.t = vec![0.0, 1.0, 2.0];
+        traj.qpos[1][0] = 0.8;
+        let mut lab = LabConfig::default();
+        lab.limits.velocity_rad_s = [2.0; DOF];
+        lab.limits.acceleration_rad_s2 = [100.0; DOF];
+        lab.limits.jerk_rad_s3 = [1000.0; DOF];
+        lab.limits.max_step_rad = 0.1;
+        let peak = run(&traj, &lab, 250.0).tcp_speed.peak_m_s;
+        lab.limits.tcp_speed_m_s = 0.5 * peak;
+        let table = SetpointTable::build(&traj, 250.0, 1.0).expect("table");
+        let r = check(&traj, &table, &lab);
+        let s = speed_scale_to_pass(&table, &r, &lab).expect("a remedy");
+        assert!((s - 0.5).abs() < 0.02, "{s}");
+        let slower = SetpointTable::build(&traj, 250.0, s * 0.99).expect("table");
+        assert!(check(&traj, &slower, &lab).is_safe());
+    }
+
+    #[test]
+    fn captures_faster_than_the_camera_follows_are_refused_with_a_remedy() {
+        // 2 s, a capture every 0.04 s: 25 Hz.
+        let n = 51;
+        let mut traj = comfortable(n, 0.04, 0.02);
+        traj.capture = Some(vec![true; n]);
+        let lab = LabConfig::default();
+        let table = SetpointTable::build(&traj, 250.0, 1.0).expect("table");
+        let mut r = check(&traj, &table, &lab);
+        assert!(r.is_safe(), "{:#?}", r.violations);
+        check_capture_rate(&mut r, &table, 15.0, "camera's limit");
+        let rate = r.capture_rate.clone().expect("recorded");
+        assert!((rate.peak_hz - 25.0).abs() < 1e-9, "{rate:?}");
+        let rules: Vec<Rule> = r.violations.iter().map(|v| v.rule).collect();
+        assert_eq!(rules, vec![Rule::CaptureRate]);
+        assert!(r.violations[0].message.contains("25.0 Hz"), "{}", r.violations[0].message);
+        let s = speed_scale_to_pass(&table, &r, &lab).expect("a remedy");
+        assert!((s - 0.6).abs() < 1e-9, "{s}");
+        // 10 Hz captures pass.
+        let mut traj = comfortable(n, 0.1, 0.02);
+        traj.capture = Some(vec![true; n]);
+        let table = SetpointTable::build(&traj, 250.0, 1.0).expect("table");
+        let mut r = check(&traj, &table, &lab);
+        check_capture_rate(&mut r, &table, 15.0, "camera's limit");
+        assert!(r.is_safe(), "{:#?}", r.violations);
     }
 }

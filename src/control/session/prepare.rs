@@ -37,7 +37,8 @@ pub(super) fn check_rate(req: &RunRequest) -> Result<(), RunError> {
 }
 
 /// Load, time-parametrise (with the lead-in and lead-out of a file that starts or ends moving)
-/// and preflight the trajectory: refuse before anything is opened.
+/// and preflight the trajectory, captures against the camera's rate included: refuse before
+/// anything is opened.
 pub(super) fn prepare(req: &RunRequest) -> Result<(Trajectory, SetpointTable), RunError> {
     check_rate(req)?;
     let options = npz::LoadOptions { waypoint_rate_hz: req.waypoint_rate_hz };
@@ -51,7 +52,10 @@ pub(super) fn prepare(req: &RunRequest) -> Result<(Trajectory, SetpointTable), R
         .map_err(|e| RunError::BadInput(e.to_string()))?;
     let table = add_ramps(table, &req.lab)
         .map_err(|e| RunError::Refused(format!("  - lead-in/lead-out: {e}")))?;
-    let report = preflight::check(&traj, &table, &req.lab);
+    let mut report = preflight::check(&traj, &table, &req.lab);
+    if let Some((limit_hz, why)) = crate::devices::camera::capture_limit(req.camera) {
+        preflight::check_capture_rate(&mut report, &table, limit_hz, &why);
+    }
     if !report.is_safe() {
         return Err(RunError::Refused(violations(&report)));
     }
