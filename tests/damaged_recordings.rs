@@ -301,7 +301,7 @@ fn calibrate_from_a_cut_or_damaged_recording_says_so_and_needs_as_many_views_as_
     // Damaged in the middle: the same, and the summary's count is given.
     let (code, text) = calibrate(&f.damaged);
     assert_eq!(code, Some(10), "{text}");
-    assert!(text.contains(&"of 18 frames") && text.contains("damaged"), "{text}");
+    assert!(text.contains("of 18 frames") && text.contains("damaged"), "{text}");
     no_writing(&text);
     // The whole file holds 18 captures: read whole, but the board is in none of them: exit 12.
     let (code, text) = calibrate(&f.whole);
