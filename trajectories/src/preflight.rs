@@ -21,7 +21,7 @@
 //! See `docs/preflight.md`.
 
 use crate::geometry::Capsule;
-use crate::kinematics::{self, CAPSULE_NAMES, DOF};
+use crate::kinematics::{self, Joints, CAPSULE_NAMES, DOF};
 use crate::lab::LabConfig;
 use crate::timing::SetpointTable;
 use crate::trajectory::Trajectory;
@@ -193,7 +193,6 @@ impl MinTrack {
 
 /// Run every preflight rule over `table` (built from `traj`) in `lab`.
 pub fn check(traj: &Trajectory, table: &SetpointTable, lab: &LabConfig) -> PreflightReport {
-    let ticks = table.ticks();
     let waypoint_of =
         |tick: usize| table.waypoint_ticks.partition_point(|w| *w <= tick).saturating_sub(1);
     let file = table.file_ticks();
@@ -207,6 +206,230 @@ pub fn check(traj: &Trajectory, table: &SetpointTable, lab: &LabConfig) -> Prefl
             format!("near waypoint {}", waypoint_of(tick))
         }
     };
+    let ticks = Ticks {
+        rate_hz: table.rate_hz,
+        dt: table.dt,
+        q: &table.q,
+        qd: &table.qd,
+        qdd: &table.qdd,
+        jerk: &table.jerk,
+    };
+    let rules = check_ticks(&ticks, lab, &waypoint_of, &place);
+    let mut warnings = Vec::new();
+    let shared = table.captures.windows(2).filter(|w| w[0].tick == w[1].tick).count();
+    if shared > 0 {
+        warnings.push(format!(
+            "{shared} capture waypoint(s) fall on the same tick as the previous capture at {} Hz; \
+             they fire once",
+            table.rate_hz
+        ));
+    }
+    PreflightReport {
+        safe: rules.violations.is_empty(),
+        waypoints: traj.len(),
+        duration_s: table.duration_s,
+        ticks: table.ticks(),
+        lead_in_ticks: table.lead_in_ticks,
+        lead_out_ticks: table.lead_out_ticks,
+        rate_hz: table.rate_hz,
+        speed_scale: table.speed_scale,
+        captures: traj.capture_count(),
+        joint_table: lab.arm.joint_table.name().to_string(),
+        joints: rules.joints,
+        clearances: rules.clearances,
+        tcp_speed: rules.tcp_speed,
+        capture_rate: None,
+        violations: rules.violations,
+        warnings,
+    }
+}
+
+/// A planned move between two rests (the approach to a trajectory's first setpoint, the retreat
+/// to the lab's rest pose) as the setpoints the loop will send, for [`check_move`]: tick 0 is
+/// the pose the arm starts from, at rest; one setpoint per tick after it, the last at rest on the
+/// goal.
+#[derive(Debug, Clone, PartialEq, Default)]
+pub struct MoveProfile {
+    /// What the move is, for messages: `approach`, `retreat`.
+    pub name: String,
+    /// Control rate, Hz.
+    pub rate_hz: f64,
+    /// Joint positions, velocities and accelerations per tick.
+    pub q: Vec<Joints>,
+    pub qd: Vec<Joints>,
+    pub qdd: Vec<Joints>,
+    /// The ticks at which the move reaches each waypoint of its path (the last: the goal).
+    pub via_ticks: Vec<usize>,
+}
+
+impl MoveProfile {
+    /// Number of ticks, the start included.
+    pub fn ticks(&self) -> usize {
+        self.q.len()
+    }
+
+    /// Duration from the start to the goal, seconds.
+    pub fn duration_s(&self) -> f64 {
+        self.ticks().saturating_sub(1) as f64 / self.rate_hz
+    }
+}
+
+/// Run every preflight rule over a planned move (as the loop will send it) in `lab`: the same
+/// rules as [`check`], at every tick, jerk being the backward difference of acceleration (so the
+/// junctions between the move's legs are checked too). The report's `waypoints` are the move's
+/// path waypoints; it has no captures.
+pub fn check_move(profile: &MoveProfile, lab: &LabConfig) -> PreflightReport {
+    let dt = 1.0 / profile.rate_hz;
+    let jerk: Vec<Joints> = (0..profile.qdd.len())
+        .map(|k| {
+            let prev = profile.qdd[k.saturating_sub(1)];
+            std::array::from_fn(|j| (profile.qdd[k][j] - prev[j]) / dt)
+        })
+        .collect();
+    let ticks = Ticks {
+        rate_hz: profile.rate_hz,
+        dt,
+        q: &profile.q,
+        qd: &profile.qd,
+        qdd: &profile.qdd,
+        jerk: &jerk,
+    };
+    let legs = profile.via_ticks.len();
+    let waypoint_of = |tick: usize| profile.via_ticks.partition_point(|w| *w < tick);
+    let place = |tick: usize| {
+        if legs > 1 {
+            format!("in the {}, leg {} of {legs}", profile.name, (waypoint_of(tick) + 1).min(legs))
+        } else {
+            format!("in the {}", profile.name)
+        }
+    };
+    let rules = check_ticks(&ticks, lab, &waypoint_of, &place);
+    PreflightReport {
+        safe: rules.violations.is_empty(),
+        waypoints: legs,
+        duration_s: profile.duration_s(),
+        ticks: profile.ticks(),
+        lead_in_ticks: 0,
+        lead_out_ticks: 0,
+        rate_hz: profile.rate_hz,
+        speed_scale: 1.0,
+        captures: 0,
+        joint_table: lab.arm.joint_table.name().to_string(),
+        joints: rules.joints,
+        clearances: rules.clearances,
+        tcp_speed: rules.tcp_speed,
+        capture_rate: None,
+        violations: rules.violations,
+        warnings: Vec::new(),
+    }
+}
+
+/// The lab's obstacles as the preflight checks them: the arm's capsules against the enclosure's
+/// faces (in the lab frame) and the keep-outs (in the base frame), and the camera's optical
+/// centre against the target centre. One pose at a time ([`Obstacles::at`]); the preflight
+/// offers every tick's, the path planner asks about the poses it tries.
+#[derive(Debug, Clone)]
+pub struct Obstacles {
+    mount: hitl_hal::Pose,
+    body: crate::kinematics::CameraBody,
+    base_in_lab: hitl_hal::Pose,
+    lo: Point3<f64>,
+    hi: Point3<f64>,
+    /// The keep-outs by name, in the base frame ([`LabConfig::keepouts_base`]).
+    pub keepouts: [(&'static str, Capsule); 3],
+    target: Point3<f64>,
+}
+
+/// The arm's clearances at one pose: each the smallest over the capsules, with the capsule's
+/// index in [`CAPSULE_NAMES`].
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct PoseClearances {
+    /// Per enclosure face, in [`FACE_NAMES`] order (the base capsule not against the floor).
+    pub faces: [(f64, usize); 6],
+    /// Per keep-out, in [`Obstacles::keepouts`] order.
+    pub keepouts: [(f64, usize); 3],
+    /// Camera optical centre to target centre, metres.
+    pub camera_target_m: f64,
+    /// Flange origin and camera optical centre, base frame.
+    pub points: [Point3<f64>; 2],
+}
+
+impl Obstacles {
+    pub fn new(lab: &LabConfig) -> Self {
+        let (lo, hi) = lab.enclosure_box();
+        Self {
+            mount: lab.camera_mount(),
+            body: lab.camera.body,
+            base_in_lab: lab.base_in_lab(),
+            lo,
+            hi,
+            keepouts: lab.keepouts_base(),
+            target: lab.target_position_base(),
+        }
+    }
+
+    /// Every clearance the preflight checks, at `q`.
+    pub fn at(&self, q: &Joints) -> PoseClearances {
+        let flange = kinematics::flange_pose(q);
+        let points = [
+            Point3::from(flange.translation.vector),
+            Point3::from((flange * self.mount).translation.vector),
+        ];
+        let mut faces = [MinTrack::NONE; 6];
+        let mut keep = [MinTrack::NONE; 3];
+        let capsules = kinematics::arm_capsules(q, &self.mount, &self.body);
+        for (c, cap) in capsules.iter().enumerate() {
+            let in_lab: Capsule = cap.transformed(&self.base_in_lab);
+            for (f, d) in in_lab.box_clearances(&self.lo, &self.hi).iter().enumerate() {
+                if !(c == BASE && f == FLOOR) {
+                    faces[f].offer(*d, 0, c);
+                }
+            }
+            for (i, (_, ko)) in self.keepouts.iter().enumerate() {
+                keep[i].offer(cap.distance_to(ko), 0, c);
+            }
+        }
+        PoseClearances {
+            faces: faces.map(|t| (t.value, t.capsule)),
+            keepouts: keep.map(|t| (t.value, t.capsule)),
+            camera_target_m: (points[1] - self.target).norm(),
+            points,
+        }
+    }
+}
+
+/// The setpoints the rules run over: entry `k` of each slice is tick `k`, at `k * dt` seconds.
+struct Ticks<'a> {
+    rate_hz: f64,
+    dt: f64,
+    q: &'a [Joints],
+    qd: &'a [Joints],
+    qdd: &'a [Joints],
+    jerk: &'a [Joints],
+}
+
+impl Ticks<'_> {
+    fn time_of(&self, tick: usize) -> f64 {
+        tick as f64 * self.dt
+    }
+}
+
+/// What the rules found over a run of ticks.
+struct RuleResults {
+    joints: Vec<JointPeaks>,
+    clearances: Vec<Clearance>,
+    tcp_speed: TcpSpeed,
+    violations: Vec<Violation>,
+}
+
+/// Every rule over `table`'s ticks: `waypoint_of` says which waypoint segment a tick lies in,
+/// `place` where it is, in words.
+fn check_ticks(
+    table: &Ticks<'_>,
+    lab: &LabConfig,
+    waypoint_of: &dyn Fn(usize) -> usize,
+    place: &dyn Fn(usize) -> String,
+) -> RuleResults {
     let mut violations = Vec::new();
 
     // Joint rules.
@@ -329,12 +552,7 @@ pub fn check(traj: &Trajectory, table: &SetpointTable, lab: &LabConfig) -> Prefl
     }
 
     // Clearance rules, every tick.
-    let mount = lab.camera_mount();
-    let body = lab.camera.body;
-    let base_in_lab = lab.base_in_lab();
-    let (lo, hi) = lab.enclosure_box();
-    let keepouts = lab.keepouts_base();
-    let target = lab.target_position_base();
+    let obstacles = Obstacles::new(lab);
     let mut faces = [MinTrack::NONE; 6];
     let mut keep = [MinTrack::NONE; 3];
     let mut camera = MinTrack::NONE;
@@ -342,33 +560,23 @@ pub fn check(traj: &Trajectory, table: &SetpointTable, lab: &LabConfig) -> Prefl
     let mut tcp = (0.0f64, 0usize, 0usize);
     let mut previous: Option<[Point3<f64>; 2]> = None;
     for (k, q) in table.q.iter().enumerate() {
-        let flange = kinematics::flange_pose(q);
-        let points = [
-            Point3::from(flange.translation.vector),
-            Point3::from((flange * mount).translation.vector),
-        ];
+        let pose = obstacles.at(q);
         if let Some(prev) = previous {
-            for (i, (p, before)) in points.iter().zip(prev).enumerate() {
+            for (i, (p, before)) in pose.points.iter().zip(prev).enumerate() {
                 let v = (p - before).norm() * table.rate_hz;
                 if v.is_nan() || v > tcp.0 {
                     tcp = (v, k, i);
                 }
             }
         }
-        previous = Some(points);
-        let capsules = kinematics::arm_capsules(q, &mount, &body);
-        for (c, cap) in capsules.iter().enumerate() {
-            let in_lab: Capsule = cap.transformed(&base_in_lab);
-            for (f, d) in in_lab.box_clearances(&lo, &hi).iter().enumerate() {
-                if !(c == BASE && f == FLOOR) {
-                    faces[f].offer(*d, k, c);
-                }
-            }
-            for (i, (_, ko)) in keepouts.iter().enumerate() {
-                keep[i].offer(cap.distance_to(ko), k, c);
-            }
+        previous = Some(pose.points);
+        for (track, (d, c)) in faces.iter_mut().zip(pose.faces) {
+            track.offer(d, k, c);
         }
-        camera.offer((points[1] - target).norm(), k, CAPSULE_NAMES.len() - 1);
+        for (track, (d, c)) in keep.iter_mut().zip(pose.keepouts) {
+            track.offer(d, k, c);
+        }
+        camera.offer(pose.camera_target_m, k, CAPSULE_NAMES.len() - 1);
     }
     let tcp_speed = TcpSpeed {
         peak_m_s: tcp.0,
@@ -440,7 +648,12 @@ pub fn check(traj: &Trajectory, table: &SetpointTable, lab: &LabConfig) -> Prefl
         add(FACE_NAMES[f].to_string(), *track, lab.margins.wall_m, Rule::Wall);
     }
     for (i, track) in keep.iter().enumerate() {
-        add(format!("keep-out {}", keepouts[i].0), *track, lab.margins.keepout_m, Rule::KeepOut);
+        add(
+            format!("keep-out {}", obstacles.keepouts[i].0),
+            *track,
+            lab.margins.keepout_m,
+            Rule::KeepOut,
+        );
     }
     add(
         "camera-target distance".into(),
@@ -449,33 +662,7 @@ pub fn check(traj: &Trajectory, table: &SetpointTable, lab: &LabConfig) -> Prefl
         Rule::CameraTargetDistance,
     );
 
-    let mut warnings = Vec::new();
-    let shared = table.captures.windows(2).filter(|w| w[0].tick == w[1].tick).count();
-    if shared > 0 {
-        warnings.push(format!(
-            "{shared} capture waypoint(s) fall on the same tick as the previous capture at {} Hz; \
-             they fire once",
-            table.rate_hz
-        ));
-    }
-    PreflightReport {
-        safe: violations.is_empty(),
-        waypoints: traj.len(),
-        duration_s: table.duration_s,
-        ticks,
-        lead_in_ticks: table.lead_in_ticks,
-        lead_out_ticks: table.lead_out_ticks,
-        rate_hz: table.rate_hz,
-        speed_scale: table.speed_scale,
-        captures: traj.capture_count(),
-        joint_table: joint_table.name().to_string(),
-        joints,
-        clearances,
-        tcp_speed,
-        capture_rate: None,
-        violations,
-        warnings,
-    }
+    RuleResults { joints, clearances, tcp_speed, violations }
 }
 
 /// Rules a slower playback always cures: per joint, velocity scales with the speed scale `s`,
