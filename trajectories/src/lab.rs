@@ -72,7 +72,17 @@ pub struct ArmPlacement {
     /// tighter one: arms whose serial digits [2:6] are 1305..8499) or `xarm7-legacy` (the first
     /// arms). On connect the arm's own table, from its serial number, is checked too.
     pub joint_table: JointTable,
+    /// The arm's rest pose, radians: where a completed run's retreat and `hitl park` bring the
+    /// arm, and where `hitl check` and `hitl plan` plan the approach from. Default
+    /// [`DEFAULT_REST_Q`], the pose the embedded stub powers up in. Within the joint table less
+    /// `margins.joint_limit_rad`.
+    pub rest_q: [f64; DOF],
 }
+
+/// The default rest pose, radians: the embedded stub's power-up pose (upper arm back, elbow and
+/// wrist bent, the camera over the base looking forward and down at the target from about
+/// 0.35 m), clear of every wall and keep-out of the default lab.
+pub const DEFAULT_REST_Q: [f64; DOF] = [0.0, -0.5, 0.0, 0.9, 0.0, 1.4, 0.0];
 
 impl Default for ArmPlacement {
     fn default() -> Self {
@@ -80,6 +90,7 @@ impl Default for ArmPlacement {
             base_in_lab_m: [0.9, 0.6095, 0.0],
             base_yaw_deg: 0.0,
             joint_table: JointTable::default(),
+            rest_q: DEFAULT_REST_Q,
         }
     }
 }
@@ -407,6 +418,18 @@ impl LabConfig {
         for rule in self.range_rules() {
             rule.check()?;
         }
+        let margin = self.margins.joint_limit_rad;
+        let limits = self.arm.joint_table.limits();
+        for (j, v) in self.arm.rest_q.iter().enumerate() {
+            let (lo, hi) = (limits[j].0 + margin, limits[j].1 - margin);
+            if !(lo..=hi).contains(v) {
+                return Err(ConfigError::Invalid(format!(
+                    "arm.rest_q[{j}] = {v} must be in [{lo:.4}, {hi:.4}] (joint table {} less \
+                     margins.joint_limit_rad)",
+                    self.arm.joint_table
+                )));
+            }
+        }
         let lo = Point3::origin();
         let hi = Point3::from(Vector3::from(self.enclosure.size_m));
         let base = Point3::from(Vector3::from(self.arm.base_in_lab_m));
@@ -700,6 +723,7 @@ mod tests {
             ("[board]\nposition_target_m = [0, 0, nan]\n", "board.position_target_m[2] = NaN"),
             ("[calibration]\nview_rms_px = [0.1, nan]\n", "calibration.view_rms_px[1] = NaN"),
             ("[interlocks]\nmax_deviation_rad = nan\n", "interlocks.max_deviation_rad = NaN"),
+            ("[arm]\nrest_q = [0, nan, 0, 0.9, 0, 1.4, 0]\n", "arm.rest_q[1] = NaN"),
         ] {
             let e = LabConfig::from_toml(text).expect_err(text).to_string();
             assert!(e.contains(key) && e.contains("finite"), "{text}: {e}");
@@ -717,6 +741,8 @@ mod tests {
             ("[board]\nrows = 0\n", "board.rows = 0"),
             ("[board]\ntag_size_m = -0.03\n", "board.tag_size_m = -0.03 must be positive"),
             ("[enclosure]\nsize_m = [2, 0, 1]\n", "enclosure.size_m[1] = 0 must be positive"),
+            ("[arm]\nrest_q = [0, -0.5, 0, -0.2, 0, 1.4, 0]\n", "arm.rest_q[3] = -0.2 must be in"),
+            ("[arm]\nrest_q = [7, -0.5, 0, 0.9, 0, 1.4, 0]\n", "arm.rest_q[0] = 7 must be in"),
         ] {
             let e = LabConfig::from_toml(text).expect_err(text).to_string();
             assert!(e.contains(key), "{text}: {e}");

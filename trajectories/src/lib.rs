@@ -8,6 +8,7 @@
 //! - [`geometry`]: capsules, segment distances, clearances;
 //! - [`lab`]: the lab configuration (enclosure, arm base, keep-outs, camera mount, limits);
 //! - [`preflight`]: the `hitl check` rules;
+//! - [`path`]: collision-free joint-space paths around the lab's obstacles (RRT-Connect);
 //! - [`bench`]: the NPZ load and time-parametrisation benchmark;
 //! - [`orbit`], [`ik`], [`planner`]: the orbital planner that writes NPZ presets.
 
@@ -19,6 +20,7 @@ pub mod kinematics;
 pub mod lab;
 pub mod npz;
 pub mod orbit;
+pub mod path;
 pub mod planner;
 pub mod preflight;
 pub mod timing;

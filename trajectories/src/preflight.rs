@@ -470,9 +470,9 @@ fn check_ticks(
                 }
             }
         }
-        let (vel, vel_at) = peak(&table.qd);
-        let (acc, acc_at) = peak(&table.qdd);
-        let (jerk, jerk_at) = peak(&table.jerk);
+        let (vel, vel_at) = peak(table.qd);
+        let (acc, acc_at) = peak(table.qdd);
+        let (jerk, jerk_at) = peak(table.jerk);
         let limits = &lab.limits;
         let joint = j + 1;
         let mut violate = |rule: Rule, message: String, tick: usize| {
