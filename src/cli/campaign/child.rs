@@ -14,11 +14,16 @@
 use std::io;
 use std::os::unix::process::CommandExt;
 use std::process::{Command, ExitStatus};
+use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::{Mutex, PoisonError};
 use std::time::Duration;
 
 /// The children being waited for (each leads its own process group).
 static CHILDREN: Mutex<Vec<u32>> = Mutex::new(Vec::new());
+
+/// Set (under the [`CHILDREN`] lock) once Ctrl-C was handed on: a child started after that gets
+/// it at once, so none slips between the campaign's check and its start.
+static INTERRUPTED: AtomicBool = AtomicBool::new(false);
 
 /// How often a waiting thread looks whether its child ended.
 const POLL: Duration = Duration::from_millis(50);
@@ -48,6 +53,9 @@ pub fn run(mut cmd: Command) -> io::Result<ExitStatus> {
         let mut list = CHILDREN.lock().unwrap_or_else(PoisonError::into_inner);
         let child = cmd.spawn()?;
         list.push(child.id());
+        if INTERRUPTED.load(Ordering::SeqCst) {
+            interrupt(child.id());
+        }
         child
     };
     loop {
@@ -68,12 +76,18 @@ pub fn run(mut cmd: Command) -> io::Result<ExitStatus> {
 /// Hand SIGINT to every running child's process group (Ctrl-C on the campaign).
 pub fn interrupt_all() {
     let list = CHILDREN.lock().unwrap_or_else(PoisonError::into_inner);
+    INTERRUPTED.store(true, Ordering::SeqCst);
     for &pid in list.iter() {
-        // SAFETY: kill(2) takes plain integers; `pid` is a child not yet reaped (removed from
-        // the list under this lock before `try_wait` returns its status), so its group id is
-        // still its own and not reused.
-        unsafe {
-            libc::kill(-(pid as libc::pid_t), libc::SIGINT);
-        }
+        interrupt(pid);
+    }
+}
+
+/// SIGINT to the process group of `pid`, a listed child; call with the [`CHILDREN`] lock held.
+fn interrupt(pid: u32) {
+    // SAFETY: kill(2) takes plain integers and touches no memory of ours. `pid` is a listed
+    // child, so not yet reaped (a child leaves the list under the lock the caller holds, before
+    // `try_wait` hands its status back): its process group id is still its own, not reused.
+    unsafe {
+        libc::kill(-(pid as libc::pid_t), libc::SIGINT);
     }
 }
