@@ -1,20 +1,23 @@
 //! The Orbbec driver's state machine on a scripted double of the SDK surface ([`CameraSdk`]):
 //! configure -> arm -> trigger -> frames, in hardware and software triggering, and what happens
 //! on stale framesets (older than their trigger), missed ones, a full capture queue, refused
-//! metadata and an unplugged camera. No camera and no SDK library needed.
+//! metadata and an unplugged camera; and the camera left as found: the sync configuration and
+//! settings found at open written back at close, on drop and after a fault, a crashed run's
+//! state file noticed and its configuration written back. No camera and no SDK library needed.
 
 use std::sync::{Arc, Mutex};
 use std::time::{Duration, Instant};
 
 use crossbeam_channel::{unbounded, Receiver, Sender};
+use hitl_drivers::orbbec::sync::{mode_names, MODE_FREE_RUN, MODE_HARDWARE_TRIGGERING};
 use hitl_drivers::orbbec::{
-    sdk_clock_now_us, CameraIdentity, CameraSdk, FrameMeta, OrbbecCamera, OrbbecError,
-    OrbbecOptions, RawFrameset, RawImage, Setting, Stream, TriggerChoice, TriggerMode,
-    VideoProfile,
+    marker, sdk_clock_now_us, CameraIdentity, CameraSdk, FrameMeta, OrbbecCamera, OrbbecError,
+    OrbbecOptions, RawFrameset, RawImage, SavedState, Setting, Stream, SyncConfig, TriggerChoice,
+    TriggerMode, VideoProfile,
 };
 use hitl_hal::{
-    CaptureRequest, Clock, Error, ErrorKind, Intrinsics, MonotonicClock, RgbdCamera, RgbdFrame,
-    StreamConfig, TimestampSource,
+    CaptureRequest, Clock, Error, ErrorKind, Intrinsics, Lifecycle, MonotonicClock, RgbdCamera,
+    RgbdFrame, StreamConfig, TimestampSource,
 };
 
 const W: u32 = 8;
@@ -27,11 +30,37 @@ enum Step {
     Stall(Duration),
 }
 
+/// What the double's camera keeps across opens (as a camera keeps its configuration).
+#[derive(Debug, Clone, PartialEq)]
+struct DeviceState {
+    sync: SyncConfig,
+    exposure_reference: i32,
+    sync_voltage_level: i32,
+}
+
+/// The camera as it leaves the factory, trigger out on (as Orbbec's examples set it).
+fn factory() -> DeviceState {
+    DeviceState {
+        sync: SyncConfig {
+            mode: MODE_FREE_RUN,
+            depth_delay_us: 0,
+            color_delay_us: 0,
+            trigger_to_image_delay_us: 0,
+            trigger_out_enable: true,
+            trigger_out_delay_us: 0,
+            frames_per_trigger: 1,
+        },
+        exposure_reference: 0,
+        sync_voltage_level: 0,
+    }
+}
+
 struct Double {
     pid: u16,
     global: bool,
     steps: Receiver<Step>,
     log: Arc<Mutex<Vec<String>>>,
+    device: Arc<Mutex<DeviceState>>,
 }
 
 impl Double {
@@ -67,9 +96,26 @@ impl CameraSdk for Double {
     fn advertised_sync_modes(&mut self) -> Result<u16, OrbbecError> {
         Ok(0x7F) // everything, as 2.9.3 does for the whole family
     }
-    fn set_trigger_mode(&mut self, mode: TriggerMode) -> Result<(), OrbbecError> {
-        self.note(format!("mode {mode}"));
+    fn sync_config(&mut self) -> Result<SyncConfig, OrbbecError> {
+        Ok(self.device.lock().expect("device").sync)
+    }
+    fn set_sync_config(&mut self, config: &SyncConfig) -> Result<(), OrbbecError> {
+        self.note(format!(
+            "sync {} out {}",
+            mode_names(config.mode),
+            if config.trigger_out_enable { "on" } else { "off" }
+        ));
+        self.device.lock().expect("device").sync = *config;
         Ok(())
+    }
+    fn get(&mut self, setting: Setting) -> Result<Option<i32>, OrbbecError> {
+        let d = self.device.lock().expect("device");
+        Ok(match setting {
+            Setting::ExposureReference => Some(d.exposure_reference),
+            // Firmware older than 1.0.76 has no sync voltage property.
+            Setting::SyncVoltageLevel if self.pid == 0x0841 => None,
+            Setting::SyncVoltageLevel => Some(d.sync_voltage_level),
+        })
     }
     fn set(&mut self, setting: Setting, value: i32) -> Result<bool, OrbbecError> {
         // Firmware older than 1.0.76 has no sync voltage property.
@@ -77,7 +123,16 @@ impl CameraSdk for Double {
             return Ok(false);
         }
         self.note(format!("set {setting:?} {value}"));
+        let mut d = self.device.lock().expect("device");
+        match setting {
+            Setting::ExposureReference => d.exposure_reference = value,
+            Setting::SyncVoltageLevel => d.sync_voltage_level = value,
+        }
         Ok(true)
+    }
+    fn stop(&mut self) -> Result<(), OrbbecError> {
+        self.note("stop".into());
+        Ok(())
     }
     fn enable_global_timestamps(&mut self) -> Result<bool, OrbbecError> {
         Ok(self.global)
@@ -112,21 +167,46 @@ struct Rig {
     steps: Sender<Step>,
     log: Arc<Mutex<Vec<String>>>,
     clock: MonotonicClock,
+    device: Arc<Mutex<DeviceState>>,
+    state_dir: tempfile::TempDir,
+}
+
+impl Rig {
+    fn device(&self) -> DeviceState {
+        self.device.lock().expect("device").clone()
+    }
+    fn marker(&self) -> std::path::PathBuf {
+        marker::marker_path(self.state_dir.path(), "CP0000000001")
+    }
 }
 
 fn rig_with(pid: u16, global: bool, tune: impl FnOnce(&mut OrbbecOptions)) -> Rig {
+    let state_dir = tempfile::tempdir().expect("state dir");
+    rig_on(pid, global, Arc::new(Mutex::new(factory())), state_dir, tune)
+}
+
+/// A rig on the camera `device` (kept across opens), with its state files in `state_dir`.
+fn rig_on(
+    pid: u16,
+    global: bool,
+    device: Arc<Mutex<DeviceState>>,
+    state_dir: tempfile::TempDir,
+    tune: impl FnOnce(&mut OrbbecOptions),
+) -> Rig {
     let clock = MonotonicClock::new();
     let (tx, rx) = unbounded();
     let log = Arc::new(Mutex::new(Vec::new()));
-    let double = Double { pid, global, steps: rx, log: Arc::clone(&log) };
+    let double =
+        Double { pid, global, steps: rx, log: Arc::clone(&log), device: Arc::clone(&device) };
     let mut options = OrbbecOptions {
         clock,
         frame_timeout: Duration::from_millis(60),
+        state_dir: Some(state_dir.path().to_path_buf()),
         ..OrbbecOptions::default()
     };
     tune(&mut options);
     let cam = OrbbecCamera::open_with(move || Ok(double), options).expect("open the double");
-    Rig { cam, steps: tx, log, clock }
+    Rig { cam, steps: tx, log, clock, device, state_dir }
 }
 
 fn config() -> StreamConfig {
@@ -193,7 +273,8 @@ fn a_hardware_triggered_frame_comes_back_paired_and_in_metres() {
     assert_eq!(
         log(&r),
         vec![
-            "mode hardware triggering".to_string(),
+            // Trigger out set explicitly (off: nothing is chained), whatever the camera had.
+            "sync hardware-triggering out off".to_string(),
             "set ExposureReference 1".into(),
             // One frame rate for both (30, preferred), depth of the colour's size absent: the
             // largest depth at 30 fps.
@@ -229,7 +310,7 @@ fn without_global_timestamps_the_frame_says_it_carries_its_arrival_time() {
     // The arrival, 20 ms after the exposure.
     let arrival = req.fired_ns + 21_000_000;
     assert!(f.exposure_ns.abs_diff(arrival) < 5_000_000, "{} vs {arrival}", f.exposure_ns);
-    assert_eq!(log(&r)[0], "mode software triggering");
+    assert_eq!(log(&r)[0], "sync software-triggering out off");
     assert_eq!(log(&r).iter().filter(|l| *l == "software trigger").count(), 1);
 }
 
@@ -370,4 +451,111 @@ fn the_sync_voltage_is_written_where_the_firmware_has_it_and_refused_where_not()
     assert_eq!(e.kind(), ErrorKind::InvalidRequest);
     assert!(e.message().contains("firmware >= 1.0.76"), "{e}");
     assert!(!log(&old).iter().any(|l| l.starts_with("start")), "nothing started: {:?}", log(&old));
+}
+
+/// Wait until `cond` holds for the rig's camera (the worker acts on its own thread).
+fn eventually(r: &Rig, what: &str, cond: impl Fn(&DeviceState) -> bool) {
+    let end = Instant::now() + Duration::from_secs(5);
+    while !cond(&r.device()) {
+        assert!(Instant::now() < end, "{what}: {:?}, log {:?}", r.device(), log(r));
+        std::thread::sleep(Duration::from_millis(2));
+    }
+}
+
+#[test]
+fn closing_writes_back_what_was_found_at_open_and_removes_the_state_file() {
+    let mut r = armed(0x0840, true, |o| o.sync_voltage_level = Some(2));
+    let armed_state = r.device();
+    assert_eq!(armed_state.sync.mode, MODE_HARDWARE_TRIGGERING);
+    assert!(!armed_state.sync.trigger_out_enable, "trigger out set explicitly");
+    assert_eq!((armed_state.exposure_reference, armed_state.sync_voltage_level), (1, 2));
+    // While the camera is changed, the state file says what it had.
+    let saved = marker::read(&r.marker()).expect("readable").expect("written before the change");
+    assert_eq!(saved.saved.sync, factory().sync);
+    assert_eq!(r.cam.found().sync, factory().sync);
+    assert_eq!(r.cam.found().warning(), None, "a camera in free-run is nothing to report");
+    r.cam.stop().expect("close");
+    assert_eq!(r.device(), factory(), "sync configuration and settings written back");
+    assert_eq!(marker::read(&r.marker()), Ok(None), "state file removed");
+    let l = log(&r);
+    let stop = l.iter().position(|x| x == "stop").expect("streams stopped");
+    assert!(l[stop + 1..].contains(&"sync free-run out on".to_string()), "{l:?}");
+}
+
+#[test]
+fn dropping_the_camera_without_closing_writes_back_too() {
+    let r = armed(0x0842, true, |_| {});
+    assert_eq!(r.device().sync.mode, MODE_HARDWARE_TRIGGERING);
+    let Rig { cam, device, state_dir, .. } = r;
+    drop(cam);
+    assert_eq!(*device.lock().expect("device"), factory());
+    assert_eq!(marker::read(&marker::marker_path(state_dir.path(), "CP0000000001")), Ok(None));
+}
+
+#[test]
+fn a_fault_writes_the_configuration_back_at_once() {
+    let mut r = armed(0x0842, true, |o| o.max_consecutive_missed = 1);
+    fire(&mut r, 1);
+    // No frame: the trigger is missed and the camera trips (a run then stops).
+    let e = next_frame(&mut r, Duration::from_secs(2)).expect_err("tripped");
+    assert_eq!(e.kind(), ErrorKind::DeviceFault);
+    eventually(&r, "written back after the fault, before any close", |d| *d == factory());
+    assert_eq!(marker::read(&r.marker()), Ok(None));
+    assert_eq!(r.cam.health().map_err(|e| e.kind()), Err(ErrorKind::DeviceFault));
+    r.cam.stop().expect("closing a tripped camera: nothing left to write back");
+}
+
+#[test]
+fn a_crashed_runs_state_file_is_reported_at_open_and_its_configuration_written_back() {
+    // A run armed the camera and died: the camera waits for triggers, the state file remains.
+    let crashed = armed(0x0840, true, |_| {});
+    let Rig { cam, device, state_dir, .. } = crashed;
+    let path = marker::marker_path(state_dir.path(), "CP0000000001");
+    let left = marker::read(&path).expect("readable").expect("written");
+    std::mem::forget(cam); // no close, no drop: as a killed process
+    assert_eq!(device.lock().expect("device").sync.mode, MODE_HARDWARE_TRIGGERING);
+    // The next open notices it...
+    let mut r = rig_on(0x0840, true, Arc::clone(&device), state_dir, |_| {});
+    let found = r.cam.found().clone();
+    assert_eq!(found.sync.mode, MODE_HARDWARE_TRIGGERING, "what the camera holds now");
+    assert_eq!(found.leftover.as_ref().map(|l| &l.saved), Some(&left.saved));
+    let warning = found.warning().expect("reported");
+    assert!(warning.contains("ended without writing the camera's configuration back"), "{warning}");
+    assert!(warning.contains("CP0000000001.sync"), "{warning}");
+    // ...and its close writes back what the camera had before the crashed run, not what it found.
+    r.cam.stop().expect("close");
+    assert_eq!(r.device(), factory());
+    assert_eq!(marker::read(&r.marker()), Ok(None));
+}
+
+#[test]
+fn a_camera_waiting_for_triggers_with_no_record_is_reported_and_left_so() {
+    let mut state = factory();
+    state.sync.mode = MODE_HARDWARE_TRIGGERING;
+    let device = Arc::new(Mutex::new(state.clone()));
+    let mut r = rig_on(0x0840, true, device, tempfile::tempdir().expect("dir"), |_| {});
+    let warning = r.cam.found().warning().expect("reported");
+    assert!(warning.contains("no record of a hitl run"), "{warning}");
+    r.cam.configure(&config()).expect("configure");
+    r.cam.arm_trigger().expect("arm");
+    r.cam.stop().expect("close");
+    assert_eq!(r.device(), state, "written back as found");
+}
+
+#[test]
+fn the_state_file_holds_what_the_camera_had_before_the_run() {
+    let r = armed(0x0840, true, |_| {});
+    let text = std::fs::read_to_string(r.marker()).expect("state file");
+    assert!(text.contains("serial=CP0000000001"), "{text}");
+    assert!(text.contains(&format!("sync_mode={MODE_FREE_RUN}")), "{text}");
+    assert!(text.contains("trigger_out_enable=1"), "{text}");
+    let back = marker::read(&r.marker()).expect("ok").expect("there");
+    assert_eq!(
+        back.saved,
+        SavedState {
+            sync: factory().sync,
+            settings: vec![(Setting::ExposureReference, 0), (Setting::SyncVoltageLevel, 0)],
+        }
+    );
+    let _ = TriggerMode::Hardware;
 }

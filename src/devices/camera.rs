@@ -1,5 +1,6 @@
-//! `--camera sim|orbbec[:hardware|:software]|none`: the choice, the stream the run asks of the camera, and the one
-//! place a camera kind is opened (a new kind is its driver plus one variant and one arm here).
+//! `--camera sim|orbbec[:hardware|:software][@SERIAL]|none`: the choice, the stream the run asks
+//! of the camera, and the one place a camera kind is opened (a new kind is its driver plus one
+//! variant and one arm here).
 
 use super::any::{Kinds, RunCamera, Unmanaged};
 use super::none::NoCamera;
@@ -21,40 +22,108 @@ pub enum CameraSpec {
     Sim,
     /// An Orbbec RGB-D camera through the Orbbec SDK, triggered as chosen: `orbbec` (hardware
     /// where the model documents it, which every supported model does), `orbbec:hardware`, or
-    /// `orbbec:software` (only models documented for it: the Gemini 305, not the 305g).
-    Orbbec(TriggerChoice),
+    /// `orbbec:software` (only models documented for it: the Gemini 305, not the 305g); with
+    /// `@SERIAL`, the camera with that serial number (needed when several are connected).
+    Orbbec(OrbbecSpec),
     /// No camera: captures are recorded as fired and no frame comes.
     None,
 }
 
+/// Which Orbbec camera and how it is triggered.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct OrbbecSpec {
+    pub trigger: TriggerChoice,
+    pub serial: Option<CameraSerial>,
+}
+
+impl OrbbecSpec {
+    pub fn new(trigger: TriggerChoice) -> Self {
+        Self { trigger, serial: None }
+    }
+}
+
+/// A camera's serial number as `--camera orbbec@SERIAL` names it: 1 to 32 letters, digits, `-`
+/// or `_` (Orbbec's are 12, e.g. CP1E54200057), kept inline so the choice stays `Copy`.
+#[derive(Clone, Copy, PartialEq, Eq)]
+pub struct CameraSerial {
+    len: u8,
+    bytes: [u8; 32],
+}
+
+impl CameraSerial {
+    pub fn as_str(&self) -> &str {
+        // Only ASCII is ever stored (checked by `parse`).
+        std::str::from_utf8(&self.bytes[..usize::from(self.len)]).unwrap_or("")
+    }
+
+    fn parse(s: &str) -> Option<Self> {
+        let ok = |c: u8| c.is_ascii_alphanumeric() || c == b'-' || c == b'_';
+        if s.is_empty() || s.len() > 32 || !s.bytes().all(ok) {
+            return None;
+        }
+        let mut bytes = [0u8; 32];
+        bytes[..s.len()].copy_from_slice(s.as_bytes());
+        Some(Self { len: u8::try_from(s.len()).ok()?, bytes })
+    }
+}
+
+impl fmt::Debug for CameraSerial {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        write!(f, "{:?}", self.as_str())
+    }
+}
+
+impl fmt::Display for CameraSerial {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        f.write_str(self.as_str())
+    }
+}
+
 /// Why a `--camera` value was refused.
 #[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
-#[error("{0:?} is not a camera: expected sim, orbbec, orbbec:hardware, orbbec:software or none")]
+#[error(
+    "{0:?} is not a camera: expected sim, orbbec, orbbec:hardware, orbbec:software (each may end \
+     in @SERIAL, 1-32 letters, digits, - or _) or none"
+)]
 pub struct CameraSpecError(pub String);
 
 impl FromStr for CameraSpec {
     type Err = CameraSpecError;
     fn from_str(s: &str) -> Result<Self, Self::Err> {
-        match s {
-            "sim" => Ok(CameraSpec::Sim),
-            "orbbec" => Ok(CameraSpec::Orbbec(TriggerChoice::Auto)),
-            "orbbec:hardware" => Ok(CameraSpec::Orbbec(TriggerChoice::Hardware)),
-            "orbbec:software" => Ok(CameraSpec::Orbbec(TriggerChoice::Software)),
-            "none" => Ok(CameraSpec::None),
-            other => Err(CameraSpecError(other.to_string())),
-        }
+        let bad = || CameraSpecError(s.to_string());
+        let (kind, serial) = match s.split_once('@') {
+            Some((k, sn)) => (k, Some(CameraSerial::parse(sn).ok_or_else(bad)?)),
+            None => (s, None),
+        };
+        let trigger = match kind {
+            "sim" | "none" if serial.is_some() => return Err(bad()),
+            "sim" => return Ok(CameraSpec::Sim),
+            "none" => return Ok(CameraSpec::None),
+            "orbbec" => TriggerChoice::Auto,
+            "orbbec:hardware" => TriggerChoice::Hardware,
+            "orbbec:software" => TriggerChoice::Software,
+            _ => return Err(bad()),
+        };
+        Ok(CameraSpec::Orbbec(OrbbecSpec { trigger, serial }))
     }
 }
 
 impl fmt::Display for CameraSpec {
     fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
-        f.write_str(match self {
-            CameraSpec::Sim => "sim",
-            CameraSpec::Orbbec(TriggerChoice::Auto) => "orbbec",
-            CameraSpec::Orbbec(TriggerChoice::Hardware) => "orbbec:hardware",
-            CameraSpec::Orbbec(TriggerChoice::Software) => "orbbec:software",
-            CameraSpec::None => "none",
-        })
+        let o = match self {
+            CameraSpec::Sim => return f.write_str("sim"),
+            CameraSpec::None => return f.write_str("none"),
+            CameraSpec::Orbbec(o) => o,
+        };
+        f.write_str(match o.trigger {
+            TriggerChoice::Auto => "orbbec",
+            TriggerChoice::Hardware => "orbbec:hardware",
+            TriggerChoice::Software => "orbbec:software",
+        })?;
+        match &o.serial {
+            Some(sn) => write!(f, "@{sn}"),
+            None => Ok(()),
+        }
     }
 }
 
@@ -123,7 +192,7 @@ pub fn check_trigger_wiring(
 ) -> Result<(), DeviceError> {
     let has_box = trigger.port().is_some() || matches!(light, LightSpec::Trigger { .. });
     match camera {
-        CameraSpec::Orbbec(TriggerChoice::Software) => Ok(()),
+        CameraSpec::Orbbec(OrbbecSpec { trigger: TriggerChoice::Software, .. }) => Ok(()),
         CameraSpec::Orbbec(_) if !has_box => Err(DeviceError::BadInput(format!(
             "--camera {camera} is hardware-triggered: its sync input is driven by the trigger \
              box's camera line, so name the box with --trigger trigger:DEV (docs/devices.md), or \
@@ -132,6 +201,31 @@ pub fn check_trigger_wiring(
         ))),
         _ => Ok(()),
     }
+}
+
+/// Open the Orbbec camera `o` names, saying what it held when that needs saying (a crashed run's
+/// configuration, a camera left waiting for triggers). Several cameras and none named is bad
+/// input (exit 2, listing them); no camera, or none with that serial, is a device failure.
+pub fn open_orbbec(
+    o: OrbbecSpec,
+    clock: hitl_hal::MonotonicClock,
+) -> Result<hitl_drivers::orbbec::OrbbecCamera, DeviceError> {
+    use hitl_drivers::orbbec::{OrbbecCamera, OrbbecOptions};
+    use hitl_hal::{Error as _, ErrorKind};
+    let options = OrbbecOptions {
+        clock,
+        trigger: o.trigger,
+        serial: o.serial.map(|s| s.to_string()),
+        ..Default::default()
+    };
+    let cam = OrbbecCamera::open(options).map_err(|e| match e.kind() {
+        ErrorKind::InvalidRequest => DeviceError::BadInput(format!("--camera: {}", e.message())),
+        _ => DeviceError::Failed(format!("Orbbec camera: {e}")),
+    })?;
+    if let Some(warning) = cam.found().warning() {
+        crate::errln!("warning: Orbbec camera {}: {warning}", cam.info().serial);
+    }
+    Ok(cam)
 }
 
 /// Open the camera `spec` names (not yet configured: the session configures and arms it).
@@ -170,16 +264,11 @@ pub fn open_camera(
         CameraSpec::Sim => {
             return Err(DeviceError::BadInput("--camera sim needs the stub feature".into()))
         }
-        CameraSpec::Orbbec(trigger) => {
-            use hitl_drivers::orbbec::{OrbbecCamera, OrbbecOptions};
-            let options = OrbbecOptions { clock: ctx.clock, trigger, ..Default::default() };
-            let cam = OrbbecCamera::open(options)
-                .map_err(|e| DeviceError::Failed(format!("Orbbec camera: {e}")))?;
-            RunCamera {
-                dev: Box::new(Kinds::new(Unmanaged(cam))),
-                name: "Orbbec camera".into(),
-                delivers_frames: true,
-            }
+        CameraSpec::Orbbec(o) => {
+            let cam = open_orbbec(o, ctx.clock)?;
+            let name = format!("Orbbec camera {}", cam.info().serial);
+            // Its lifecycle's stop writes the camera's configuration back (so does dropping it).
+            RunCamera { dev: Box::new(Kinds::new(cam)), name, delivers_frames: true }
         }
     })
 }
@@ -194,8 +283,26 @@ mod tests {
             let spec: CameraSpec = text.parse().expect(text);
             assert_eq!(spec.to_string(), text);
         }
-        assert_eq!("orbbec".parse(), Ok(CameraSpec::Orbbec(TriggerChoice::Auto)));
+        assert_eq!("orbbec".parse(), Ok(CameraSpec::Orbbec(OrbbecSpec::new(TriggerChoice::Auto))));
         assert!("orbbec:hw".parse::<CameraSpec>().is_err());
+    }
+
+    #[test]
+    fn a_camera_is_named_by_its_serial_number() {
+        for text in ["orbbec@CP1E54200057", "orbbec:software@cp-1_2", "orbbec:hardware@X"] {
+            let spec: CameraSpec = text.parse().expect(text);
+            assert_eq!(spec.to_string(), text);
+        }
+        let Ok(CameraSpec::Orbbec(o)) = "orbbec:software@CP1".parse() else { panic!("parses") };
+        assert_eq!(
+            (o.trigger, o.serial.map(|s| s.to_string())),
+            (TriggerChoice::Software, Some("CP1".into()))
+        );
+        for bad in
+            ["orbbec@", "orbbec@a b", "sim@CP1", "none@X", &format!("orbbec@{}", "A".repeat(33))]
+        {
+            assert!(bad.parse::<CameraSpec>().is_err(), "{bad}");
+        }
     }
 
     #[test]
@@ -205,9 +312,9 @@ mod tests {
         let tb_light = LightSpec::Trigger { port: "/dev/ttyACM0".into() };
         let tb = TriggerSpec::Box { port: "/dev/ttyACM0".into() };
         let dmx: LightSpec = "dmx:/dev/ttyUSB0".parse().expect("dmx");
-        let auto = CameraSpec::Orbbec(TriggerChoice::Auto);
-        let hw = CameraSpec::Orbbec(TriggerChoice::Hardware);
-        let sw = CameraSpec::Orbbec(TriggerChoice::Software);
+        let auto = CameraSpec::Orbbec(OrbbecSpec::new(TriggerChoice::Auto));
+        let hw = CameraSpec::Orbbec(OrbbecSpec::new(TriggerChoice::Hardware));
+        let sw = CameraSpec::Orbbec(OrbbecSpec::new(TriggerChoice::Software));
         assert!(
             matches!(check_trigger_wiring(auto, &none, &no_box), Err(DeviceError::BadInput(m)) if m.contains("--trigger trigger:DEV"))
         );

@@ -8,7 +8,7 @@ use hitl_hal::Intrinsics;
 use super::error::OrbbecError;
 use super::frame::RawFrameset;
 use super::profiles::VideoProfile;
-use super::sync::TriggerMode;
+use super::sync::SyncConfig;
 
 /// What a camera says about itself.
 #[derive(Debug, Clone, PartialEq, Eq)]
@@ -40,9 +40,32 @@ pub enum Setting {
     SyncVoltageLevel,
 }
 
-/// The SDK calls the worker makes, in the order it makes them: identity and profiles at open and
-/// configure; trigger mode, settings, global timestamps and start at arm; then triggers and
-/// framesets. Every call happens on the worker thread.
+impl Setting {
+    /// Every setting the driver may write (and so saves at open and writes back at close).
+    pub const ALL: [Setting; 2] = [Setting::ExposureReference, Setting::SyncVoltageLevel];
+
+    /// The name in the state file and in messages.
+    pub fn key(self) -> &'static str {
+        match self {
+            Setting::ExposureReference => "exposure_reference",
+            Setting::SyncVoltageLevel => "sync_voltage_level",
+        }
+    }
+}
+
+/// What the driver found on the camera and writes back when it lets the camera go: the sync
+/// configuration, and each setting it may change that the camera lets it read.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct SavedState {
+    pub sync: SyncConfig,
+    pub settings: Vec<(Setting, i32)>,
+}
+
+/// The SDK calls the worker makes, in the order it makes them: identity, sync configuration and
+/// settings (saved) at open, profiles at configure; sync configuration, settings, global
+/// timestamps and start at arm; then triggers and framesets; at close (or on a fault) stop and
+/// the saved sync configuration and settings written back. Every call happens on the worker
+/// thread.
 pub trait CameraSdk {
     fn identity(&mut self) -> Result<CameraIdentity, OrbbecError>;
     fn profiles(&mut self, stream: Stream) -> Result<Vec<VideoProfile>, OrbbecError>;
@@ -50,8 +73,12 @@ pub trait CameraSdk {
     fn intrinsics(&mut self, color: VideoProfile) -> Result<Intrinsics, OrbbecError>;
     /// `OB_MULTI_DEVICE_SYNC_MODE_*` bits the SDK advertises.
     fn advertised_sync_modes(&mut self) -> Result<u16, OrbbecError>;
-    /// Put the camera in `mode`, one frame per trigger, no delays.
-    fn set_trigger_mode(&mut self, mode: TriggerMode) -> Result<(), OrbbecError>;
+    /// The sync configuration the camera holds now.
+    fn sync_config(&mut self) -> Result<SyncConfig, OrbbecError>;
+    /// Write the whole sync configuration.
+    fn set_sync_config(&mut self, config: &SyncConfig) -> Result<(), OrbbecError>;
+    /// Read `setting`; `Ok(None)` when the camera does not let it be read.
+    fn get(&mut self, setting: Setting) -> Result<Option<i32>, OrbbecError>;
     /// Write `setting`; `Ok(false)` when the camera does not offer it.
     fn set(&mut self, setting: Setting, value: i32) -> Result<bool, OrbbecError>;
     /// Turn on global (exposure) timestamps where supported; returns whether they are on.
@@ -64,4 +91,7 @@ pub trait CameraSdk {
     fn software_trigger(&mut self) -> Result<(), OrbbecError>;
     /// The next frameset, depth aligned to colour, or `None` after `timeout_ms`.
     fn wait_frameset(&mut self, timeout_ms: u32) -> Result<Option<RawFrameset>, OrbbecError>;
+    /// Stop the streams (nothing when they are not running), before the saved configuration is
+    /// written back.
+    fn stop(&mut self) -> Result<(), OrbbecError>;
 }

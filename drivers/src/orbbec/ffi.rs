@@ -93,8 +93,8 @@ pub const OB_FRAME_COLOR: c_int = 2;
 pub const OB_FRAME_DEPTH: c_int = 3;
 #[cfg(test)]
 pub const OB_DISTORTION_NONE: c_int = 0;
-pub const OB_MULTI_DEVICE_SYNC_MODE_SOFTWARE_TRIGGERING: c_int = 1 << 5;
-pub const OB_MULTI_DEVICE_SYNC_MODE_HARDWARE_TRIGGERING: c_int = 1 << 6;
+// The OB_MULTI_DEVICE_SYNC_MODE_* bits are `super::sync::MODE_*`.
+pub const OB_PERMISSION_READ: c_int = 1;
 pub const OB_PERMISSION_WRITE: c_int = 2;
 /// `OB_PROP_INTRA_CAMERA_SYNC_REFERENCE_INT` (Property.h), values `ob_intra_camera_sync_reference`.
 pub const OB_PROP_INTRA_CAMERA_SYNC_REFERENCE_INT: c_int = 236;
@@ -162,6 +162,7 @@ api! {
     ob_delete_device_list: fn(*mut ObDeviceList, Err);
     ob_device_list_get_count: fn(*const ObDeviceList, Err) -> u32;
     ob_device_list_get_device: fn(*const ObDeviceList, u32, Err) -> *mut ObDevice;
+    ob_device_list_get_device_serial_number: fn(*const ObDeviceList, u32, Err) -> *const c_char;
     ob_delete_device: fn(*mut ObDevice, Err);
     ob_device_get_device_info: fn(*const ObDevice, Err) -> *mut ObDeviceInfo;
     ob_delete_device_info: fn(*mut ObDeviceInfo, Err);
@@ -171,6 +172,7 @@ api! {
     ob_device_info_get_firmware_version: fn(*const ObDeviceInfo, Err) -> *const c_char;
     ob_device_is_property_supported: fn(*const ObDevice, c_int, c_int, Err) -> bool;
     ob_device_set_int_property: fn(*mut ObDevice, c_int, i32, Err);
+    ob_device_get_int_property: fn(*mut ObDevice, c_int, Err) -> i32;
     ob_device_get_supported_multi_device_sync_mode_bitmap: fn(*const ObDevice, Err) -> u16;
     ob_device_get_multi_device_sync_config: fn(*const ObDevice, Err) -> ObMultiDeviceSyncConfig;
     ob_device_set_multi_device_sync_config: fn(*mut ObDevice, *const ObMultiDeviceSyncConfig, Err);
@@ -189,6 +191,7 @@ api! {
     ob_video_stream_profile_get_fps: fn(*const ObStreamProfile, Err) -> u32;
     ob_delete_stream_profile: fn(*const ObStreamProfile, Err);
     ob_video_stream_profile_get_intrinsic: fn(*const ObStreamProfile, Err) -> ObCameraIntrinsic;
+    ob_video_stream_profile_get_distortion: fn(*const ObStreamProfile, Err) -> ObCameraDistortion;
     ob_video_stream_profile_get_width: fn(*const ObStreamProfile, Err) -> u32;
     ob_video_stream_profile_get_height: fn(*const ObStreamProfile, Err) -> u32;
     ob_create_config: fn(Err) -> *mut ObConfig;
@@ -395,6 +398,16 @@ impl DeviceList {
         })
     }
 
+    /// The serial number of camera `index`, read from the list without opening the camera.
+    pub fn serial(&self, index: u32) -> Result<String, SdkError> {
+        // SAFETY: `self.ptr` is live; the string belongs to the list, which outlives the copy.
+        self.sdk.call("ob_device_list_get_device_serial_number", |e| {
+            cstr_to_string(unsafe {
+                (self.sdk.api.ob_device_list_get_device_serial_number)(self.ptr, index, e)
+            })
+        })
+    }
+
     pub fn device(&self, index: u32) -> Result<Device, SdkError> {
         // SAFETY: `self.ptr` is live; an out-of-range index is reported through `ob_error`.
         let p = self.sdk.call("ob_device_list_get_device", |e| unsafe {
@@ -477,6 +490,21 @@ impl Device {
         })
     }
 
+    /// Whether the device lets us read integer property `id`.
+    pub fn property_readable(&self, id: c_int) -> Result<bool, SdkError> {
+        // SAFETY: `self.ptr` is a live device; `id` and the permission are plain integers.
+        self.sdk.call("ob_device_is_property_supported", |e| unsafe {
+            (self.sdk.api.ob_device_is_property_supported)(self.ptr, id, OB_PERMISSION_READ, e)
+        })
+    }
+
+    pub fn int_property(&self, id: c_int) -> Result<i32, SdkError> {
+        // SAFETY: `self.ptr` is a live device; an unknown id is reported via `ob_error`.
+        self.sdk.call("ob_device_get_int_property", |e| unsafe {
+            (self.sdk.api.ob_device_get_int_property)(self.ptr, id, e)
+        })
+    }
+
     pub fn set_int_property(&self, id: c_int, value: i32) -> Result<(), SdkError> {
         // SAFETY: `self.ptr` is a live device; an unknown id or value is reported via `ob_error`.
         self.sdk.call("ob_device_set_int_property", |e| unsafe {
@@ -550,6 +578,14 @@ impl Profile {
         // SAFETY: `self.ptr` is a live video stream profile.
         self.sdk.call("ob_video_stream_profile_get_intrinsic", |e| unsafe {
             (self.sdk.api.ob_video_stream_profile_get_intrinsic)(self.ptr, e)
+        })
+    }
+
+    /// The lens distortion the SDK reports for this profile (read for commissioning only).
+    pub fn distortion(&self) -> Result<ObCameraDistortion, SdkError> {
+        // SAFETY: `self.ptr` is a live video stream profile; the struct is returned by value.
+        self.sdk.call("ob_video_stream_profile_get_distortion", |e| unsafe {
+            (self.sdk.api.ob_video_stream_profile_get_distortion)(self.ptr, e)
         })
     }
 
@@ -750,6 +786,17 @@ impl Pipeline {
         result?;
         self.started = true;
         Ok(())
+    }
+
+    /// Stop the streams (nothing when they are not running).
+    pub fn stop(&mut self) -> Result<(), SdkError> {
+        if !self.started {
+            return Ok(());
+        }
+        self.started = false;
+        // SAFETY: `self.ptr` is a live, started pipeline.
+        self.sdk
+            .call("ob_pipeline_stop", |e| unsafe { (self.sdk.api.ob_pipeline_stop)(self.ptr, e) })
     }
 
     /// Wait up to `timeout_ms` for a frameset; `None` on timeout.

@@ -18,6 +18,11 @@
 //! - Frame metadata from the SDK is checked before use ([`frame`]); a missed frameset is counted,
 //!   `max_consecutive_missed` in a row are a fault; a full capture queue is "busy" (`Timeout`).
 //! - [`probe`] lists the connected cameras for `hitl probe`.
+//! - The camera is left as found: its sync configuration and the settings the driver changes are
+//!   saved at open and written back at close (`Lifecycle::stop`, or dropping the handle), and
+//!   right away on a fault; a state file ([`marker`]) lets the next open notice and report a run
+//!   that could not write them back, and write them back itself.
+//! - With several cameras connected, one is picked by serial number ([`OrbbecOptions::serial`]).
 //!
 //! [`OrbbecCamera::open`] fails before anything moves, with kind `NotFound` and a message naming
 //! the Orbbec camera, when the library is missing or no camera is connected. docs/orbbec.md.
@@ -26,6 +31,7 @@ mod backend;
 mod error;
 mod ffi;
 pub mod frame;
+pub mod marker;
 pub mod pairing;
 mod probe;
 pub mod profiles;
@@ -44,17 +50,18 @@ use std::time::Duration;
 use crossbeam_channel::{bounded, Sender};
 use crossbeam_queue::ArrayQueue;
 use hitl_hal::{
-    CaptureRequest, ErrorKind, ErrorType, Intrinsics, MonotonicClock, RgbdCamera, RgbdFrame,
-    StreamConfig,
+    CaptureRequest, ErrorKind, ErrorType, Intrinsics, Lifecycle, MonotonicClock, RgbdCamera,
+    RgbdFrame, StreamConfig,
 };
 
-pub use backend::{CameraIdentity, CameraSdk, Setting, Stream};
+pub use backend::{CameraIdentity, CameraSdk, SavedState, Setting, Stream};
 pub use error::OrbbecError;
 pub use frame::{FrameMeta, RawFrameset, RawImage};
-pub use probe::{probe, CameraInfo};
+pub use marker::Leftover;
+pub use probe::{probe, probe_with, CameraInfo, Distortion, Lens};
 pub use profiles::VideoProfile;
-pub use sdk::SdkCamera;
-pub use sync::{TriggerChoice, TriggerMode};
+pub use sdk::{pick_camera, SdkCamera};
+pub use sync::{SyncConfig, TriggerChoice, TriggerMode};
 use worker::{Command, Shared};
 
 /// Which camera was opened (name, serial, product id, firmware, SDK version).
@@ -68,8 +75,15 @@ pub const LIBRARY_ENV: &str = "HITL_ORBBEC_LIB";
 pub struct OrbbecOptions {
     /// Path of `libOrbbecSDK.so`.
     pub library: PathBuf,
-    /// Which enumerated camera to use.
-    pub device_index: u32,
+    /// The serial number of the camera to use; `None`: the only one connected (several and none
+    /// named is refused with `InvalidRequest`, listing them).
+    pub serial: Option<String>,
+    /// Whether the camera passes each trigger on at its sync output (to a chained camera); off
+    /// by default, set explicitly at arm whatever the camera had.
+    pub trigger_out: bool,
+    /// Where the state file that lets a crashed run be noticed lives ([`marker`]); `None`: no
+    /// file is kept (a crash is then not noticed).
+    pub state_dir: Option<PathBuf>,
     /// A trigger without a frameset within this is missed (counted).
     pub frame_timeout: Duration,
     /// This many missed framesets in a row are a fault (the camera answers no trigger).
@@ -107,7 +121,9 @@ impl Default for OrbbecOptions {
     fn default() -> Self {
         Self {
             library: Self::default_library(),
-            device_index: 0,
+            serial: None,
+            trigger_out: false,
+            state_dir: marker::default_state_dir(),
             frame_timeout: Duration::from_millis(1000),
             max_consecutive_missed: 3,
             pairing_slack: Duration::from_millis(2),
@@ -133,9 +149,56 @@ pub struct ArmReport {
     pub depth: VideoProfile,
 }
 
+/// What the driver found on the camera at open.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct FoundState {
+    /// The sync configuration the camera held.
+    pub sync: SyncConfig,
+    /// The state file of a run that did not write the camera's configuration back: its saved
+    /// configuration is the one written back at this camera's close.
+    pub leftover: Option<Leftover>,
+    /// A state file that could not be read (named, with why).
+    pub marker_error: Option<String>,
+}
+
+impl FoundState {
+    /// What the operator should hear about at open: a configuration a crashed run left, one that
+    /// waits for triggers with no record of who set it, or a state file that cannot be read.
+    pub fn warning(&self) -> Option<String> {
+        if let Some(l) = &self.leftover {
+            return Some(format!(
+                "{}; the camera holds {}; it gets its configuration back when this session \
+                 closes it",
+                l.describe(),
+                self.sync
+            ));
+        }
+        if let Some(e) = &self.marker_error {
+            return Some(format!("Orbbec camera: {e}"));
+        }
+        self.sync.is_triggered().then(|| {
+            format!(
+                "the Orbbec camera was found waiting for triggers ({}) with no record of a hitl \
+                 run setting it (another tool, or a crash before hitl kept records): other tools \
+                 get no frames from it; hitl writes this configuration back when it closes the \
+                 camera",
+                self.sync
+            )
+        })
+    }
+}
+
+/// What opening gave: who the camera is and what it held.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub(crate) struct Opened {
+    pub identity: CameraIdentity,
+    pub found: FoundState,
+}
+
 /// An Orbbec camera, hardware- or software-triggered, behind [`RgbdCamera`].
 pub struct OrbbecCamera {
     info: OrbbecInfo,
+    found: FoundState,
     armed: Option<ArmReport>,
     shared: Arc<Shared>,
     commands: Sender<Command>,
@@ -145,8 +208,8 @@ pub struct OrbbecCamera {
 impl OrbbecCamera {
     /// Load the SDK, find the camera and open it. Blocks (about a second) while the SDK starts.
     pub fn open(options: OrbbecOptions) -> Result<Self, OrbbecError> {
-        let (library, index) = (options.library.clone(), options.device_index);
-        Self::open_with(move || SdkCamera::open(&library, index), options)
+        let (library, serial) = (options.library.clone(), options.serial.clone());
+        Self::open_with(move || SdkCamera::open(&library, serial.as_deref()), options)
     }
 
     /// Open through any [`CameraSdk`]: `open` runs on the worker thread, which then owns the
@@ -175,8 +238,8 @@ impl OrbbecCamera {
                     format!("Orbbec camera: cannot start worker: {e}"),
                 )
             })?;
-        let info = match ready_rx.recv() {
-            Ok(Ok(info)) => info,
+        let opened = match ready_rx.recv() {
+            Ok(Ok(opened)) => opened,
             Ok(Err(e)) => {
                 let _ = worker.join();
                 return Err(e);
@@ -189,11 +252,24 @@ impl OrbbecCamera {
                 ));
             }
         };
-        Ok(Self { info, armed: None, shared, commands: cmd_tx, worker: Some(worker) })
+        Ok(Self {
+            info: opened.identity,
+            found: opened.found,
+            armed: None,
+            shared,
+            commands: cmd_tx,
+            worker: Some(worker),
+        })
     }
 
     pub fn info(&self) -> &OrbbecInfo {
         &self.info
+    }
+
+    /// What the camera held at open (and a crashed run's leftover, if any): written back at
+    /// close.
+    pub fn found(&self) -> &FoundState {
+        &self.found
     }
 
     /// The full description of the fault that stopped the camera, if any.
@@ -236,6 +312,14 @@ impl OrbbecCamera {
         make: impl FnOnce(Sender<Result<T, OrbbecError>>) -> Command,
     ) -> Result<T, OrbbecError> {
         self.shared.check()?;
+        self.ask_anyway(make)
+    }
+
+    /// Ask the worker even after a fault (closing must still write the configuration back).
+    fn ask_anyway<T>(
+        &self,
+        make: impl FnOnce(Sender<Result<T, OrbbecError>>) -> Command,
+    ) -> Result<T, OrbbecError> {
         let (tx, rx) = bounded(1);
         let gone = || OrbbecError::new(ErrorKind::Disconnected, "Orbbec camera: worker has ended");
         self.commands.send(make(tx)).map_err(|_| gone())?;
@@ -254,6 +338,18 @@ impl Drop for OrbbecCamera {
 
 impl ErrorType for OrbbecCamera {
     type Error = OrbbecError;
+}
+
+/// `health` is the sticky fault (no allocation); `stop` stops the streams and writes the
+/// configuration found at open back (also done when the handle is dropped without it).
+impl Lifecycle for OrbbecCamera {
+    fn health(&mut self) -> Result<(), OrbbecError> {
+        self.shared.check()
+    }
+
+    fn stop(&mut self) -> Result<(), OrbbecError> {
+        self.ask_anyway(Command::Close)
+    }
 }
 
 impl RgbdCamera for OrbbecCamera {

@@ -1,6 +1,7 @@
-//! [`CameraSdk`] on the real Orbbec SDK v2 library (through [`super::ffi`]): opening the first
-//! (or n-th) camera, listing its profiles, hard-sync settings, and framesets whose depth the
-//! SDK's `Align` filter has put onto the colour image (2.9.3's pipeline D2C mode does nothing).
+//! [`CameraSdk`] on the real Orbbec SDK v2 library (through [`super::ffi`]): opening the camera
+//! with a given serial number (or the only one connected), listing its profiles, hard-sync
+//! settings, and framesets whose depth the SDK's `Align` filter has put onto the colour image
+//! (2.9.3's pipeline D2C mode does nothing).
 
 use std::path::Path;
 use std::sync::Arc;
@@ -9,15 +10,15 @@ use hitl_hal::{ErrorKind, Intrinsics};
 
 use super::backend::{CameraIdentity, CameraSdk, Setting, Stream};
 use super::error::OrbbecError;
+use super::ffi::ObMultiDeviceSyncConfig;
 use super::ffi::{
     AlignFilter, Context, Device, Frame, Pipeline, Profile, ProfileDesc, Sdk,
-    OB_MULTI_DEVICE_SYNC_MODE_HARDWARE_TRIGGERING, OB_MULTI_DEVICE_SYNC_MODE_SOFTWARE_TRIGGERING,
     OB_PROP_INTRA_CAMERA_SYNC_REFERENCE_INT, OB_PROP_USB_SYNC_VOLTAGE_LEVEL_INT, OB_SENSOR_COLOR,
     OB_SENSOR_DEPTH,
 };
 use super::frame::{check_intrinsics, FrameMeta, RawFrameset, RawImage};
 use super::profiles::VideoProfile;
-use super::sync::TriggerMode;
+use super::sync::SyncConfig;
 
 /// The loaded SDK and its context (quiet logs, monotonic timestamps).
 pub(super) struct Loaded {
@@ -53,6 +54,45 @@ pub(super) fn load(path: &Path) -> Result<Loaded, OrbbecError> {
         Context::new(&sdk).map_err(|e| OrbbecError::sdk("creating the SDK context", &e))?;
     let monotonic = context.use_monotonic_timestamps().is_ok();
     Ok(Loaded { sdk, context, version, monotonic })
+}
+
+pub(super) fn property_id(setting: Setting) -> i32 {
+    match setting {
+        Setting::ExposureReference => OB_PROP_INTRA_CAMERA_SYNC_REFERENCE_INT,
+        Setting::SyncVoltageLevel => OB_PROP_USB_SYNC_VOLTAGE_LEVEL_INT,
+    }
+}
+
+pub(super) fn sync_from_ffi(c: &ObMultiDeviceSyncConfig) -> Result<SyncConfig, OrbbecError> {
+    // Copies out of the packed struct (no references into it).
+    let (mode, depth, color, t2i) =
+        (c.sync_mode, c.depth_delay_us, c.color_delay_us, c.trigger_to_image_delay_us);
+    let (out, out_delay, frames) =
+        (c.trigger_out_enable, c.trigger_out_delay_us, c.frames_per_trigger);
+    let mode = u16::try_from(mode).ok().filter(|m| m.count_ones() <= 1).ok_or_else(|| {
+        OrbbecError::new(ErrorKind::DeviceFault, format!("Orbbec camera reports sync mode {mode}"))
+    })?;
+    Ok(SyncConfig {
+        mode,
+        depth_delay_us: depth,
+        color_delay_us: color,
+        trigger_to_image_delay_us: t2i,
+        trigger_out_enable: out,
+        trigger_out_delay_us: out_delay,
+        frames_per_trigger: frames,
+    })
+}
+
+fn sync_to_ffi(c: &SyncConfig) -> ObMultiDeviceSyncConfig {
+    ObMultiDeviceSyncConfig {
+        sync_mode: i32::from(c.mode),
+        depth_delay_us: c.depth_delay_us,
+        color_delay_us: c.color_delay_us,
+        trigger_to_image_delay_us: c.trigger_to_image_delay_us,
+        trigger_out_enable: c.trigger_out_enable,
+        trigger_out_delay_us: c.trigger_out_delay_us,
+        frames_per_trigger: c.frames_per_trigger,
+    }
 }
 
 fn desc(p: VideoProfile) -> ProfileDesc {
@@ -102,9 +142,39 @@ pub struct SdkCamera {
     monotonic: bool,
 }
 
+/// Which of the connected cameras (`serials`, in the SDK's order) to open: the one with serial
+/// number `wanted` (compared without case, as Orbbec's multi-device example does), else the only
+/// one. No camera, or no camera with that serial: `NotFound`; several and none named:
+/// `InvalidRequest` listing them (the operator must say which).
+pub fn pick_camera(serials: &[String], wanted: Option<&str>) -> Result<u32, OrbbecError> {
+    let list = || serials.join(", ");
+    let index = |i: usize| u32::try_from(i).unwrap_or(u32::MAX);
+    match (wanted, serials.len()) {
+        (_, 0) => Err(OrbbecError::new(ErrorKind::NotFound, "no Orbbec camera found")),
+        (Some(w), _) => {
+            serials.iter().position(|s| s.eq_ignore_ascii_case(w)).map(index).ok_or_else(|| {
+                OrbbecError::new(
+                    ErrorKind::NotFound,
+                    format!("no Orbbec camera with serial {w}: connected: {}", list()),
+                )
+            })
+        }
+        (None, 1) => Ok(0),
+        (None, n) => Err(OrbbecError::new(
+            ErrorKind::InvalidRequest,
+            format!(
+                "{n} Orbbec cameras are connected (serials {}): name one with --camera \
+                 orbbec@SERIAL",
+                list()
+            ),
+        )),
+    }
+}
+
 impl SdkCamera {
-    /// Open camera number `index` of the library at `path`.
-    pub fn open(path: &Path, index: u32) -> Result<SdkCamera, OrbbecError> {
+    /// Open the camera with serial number `serial` (or the only one connected) through the
+    /// library at `path`.
+    pub fn open(path: &Path, serial: Option<&str>) -> Result<SdkCamera, OrbbecError> {
         let Loaded { sdk, context, version, monotonic } = load(path)?;
         let list = context.devices().map_err(|e| OrbbecError::sdk("listing devices", &e))?;
         let count = list.count().map_err(|e| OrbbecError::sdk("counting devices", &e))?;
@@ -118,12 +188,10 @@ impl SdkCamera {
                 ),
             ));
         }
-        if index >= count {
-            return Err(OrbbecError::new(
-                ErrorKind::NotFound,
-                format!("Orbbec camera #{index} not found: the Orbbec SDK sees {count} camera(s)"),
-            ));
-        }
+        let serials = (0..count.min(64))
+            .map(|i| list.serial(i).map_err(|e| OrbbecError::sdk("reading serial numbers", &e)))
+            .collect::<Result<Vec<_>, _>>()?;
+        let index = pick_camera(&serials, serial)?;
         let device =
             list.device(index).map_err(|e| OrbbecError::sdk("opening the Orbbec camera", &e))?;
         drop(list);
@@ -198,27 +266,29 @@ impl CameraSdk for SdkCamera {
         self.device.sync_modes().map_err(|e| OrbbecError::sdk("reading sync modes", &e))
     }
 
-    fn set_trigger_mode(&mut self, mode: TriggerMode) -> Result<(), OrbbecError> {
-        let mut sync =
+    fn sync_config(&mut self) -> Result<SyncConfig, OrbbecError> {
+        let c =
             self.device.sync_config().map_err(|e| OrbbecError::sdk("reading sync config", &e))?;
-        sync.sync_mode = match mode {
-            TriggerMode::Hardware => OB_MULTI_DEVICE_SYNC_MODE_HARDWARE_TRIGGERING,
-            TriggerMode::Software => OB_MULTI_DEVICE_SYNC_MODE_SOFTWARE_TRIGGERING,
-        };
-        sync.frames_per_trigger = 1;
-        sync.trigger_to_image_delay_us = 0;
-        sync.depth_delay_us = 0;
-        sync.color_delay_us = 0;
+        sync_from_ffi(&c)
+    }
+
+    fn set_sync_config(&mut self, config: &SyncConfig) -> Result<(), OrbbecError> {
         self.device
-            .set_sync_config(&sync)
-            .map_err(|e| OrbbecError::sdk(&format!("setting {mode}"), &e))
+            .set_sync_config(&sync_to_ffi(config))
+            .map_err(|e| OrbbecError::sdk(&format!("setting sync config ({config})"), &e))
+    }
+
+    fn get(&mut self, setting: Setting) -> Result<Option<i32>, OrbbecError> {
+        let id = property_id(setting);
+        let doing = format!("reading {setting:?}");
+        if !self.device.property_readable(id).map_err(|e| OrbbecError::sdk(&doing, &e))? {
+            return Ok(None);
+        }
+        self.device.int_property(id).map(Some).map_err(|e| OrbbecError::sdk(&doing, &e))
     }
 
     fn set(&mut self, setting: Setting, value: i32) -> Result<bool, OrbbecError> {
-        let id = match setting {
-            Setting::ExposureReference => OB_PROP_INTRA_CAMERA_SYNC_REFERENCE_INT,
-            Setting::SyncVoltageLevel => OB_PROP_USB_SYNC_VOLTAGE_LEVEL_INT,
-        };
+        let id = property_id(setting);
         let doing = format!("setting {setting:?} to {value}");
         if !self.device.property_writable(id).map_err(|e| OrbbecError::sdk(&doing, &e))? {
             return Ok(false);
@@ -249,6 +319,11 @@ impl CameraSdk for SdkCamera {
         Ok(())
     }
 
+    fn stop(&mut self) -> Result<(), OrbbecError> {
+        self.align = None;
+        self.pipeline.stop().map_err(|e| OrbbecError::sdk("stopping the streams", &e))
+    }
+
     fn software_trigger(&mut self) -> Result<(), OrbbecError> {
         self.device.trigger_capture().map_err(|e| OrbbecError::sdk("software trigger", &e))
     }
@@ -265,5 +340,28 @@ impl CameraSdk for SdkCamera {
             .wait_frameset(timeout_ms)
             .map_err(|e| OrbbecError::sdk("waiting for a frameset", &e))?;
         set.map(|s| align_and_copy(align, &s)).transpose()
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use hitl_hal::Error as _;
+
+    fn serials(s: &[&str]) -> Vec<String> {
+        s.iter().map(|s| s.to_string()).collect()
+    }
+
+    #[test]
+    fn a_camera_is_picked_by_serial_or_as_the_only_one() {
+        assert_eq!(pick_camera(&serials(&["CP1"]), None), Ok(0));
+        assert_eq!(pick_camera(&serials(&["CP1", "CP2"]), Some("cp2")), Ok(1));
+        let e = pick_camera(&serials(&["CP1", "CP2"]), None).expect_err("which one?");
+        assert_eq!(e.kind(), ErrorKind::InvalidRequest);
+        assert!(e.message().contains("serials CP1, CP2") && e.message().contains("@SERIAL"), "{e}");
+        let e = pick_camera(&serials(&["CP1"]), Some("CP9")).expect_err("not connected");
+        assert_eq!(e.kind(), ErrorKind::NotFound);
+        assert!(e.message().contains("CP9") && e.message().contains("connected: CP1"), "{e}");
+        assert_eq!(pick_camera(&[], None).map_err(|e| e.kind()), Err(ErrorKind::NotFound));
     }
 }

@@ -80,6 +80,63 @@ pub fn mode_names(bits: u16) -> String {
     }
 }
 
+/// The camera's multi-device sync configuration (`ob_multi_device_sync_config`), as the driver
+/// reads it at open, writes its own at arm, and writes the one it found back at close.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct SyncConfig {
+    /// One `MODE_*` bit (the factory default is free-run).
+    pub mode: u16,
+    pub depth_delay_us: i32,
+    pub color_delay_us: i32,
+    pub trigger_to_image_delay_us: i32,
+    /// Whether the camera passes each trigger on at its sync output (to a chained camera).
+    pub trigger_out_enable: bool,
+    pub trigger_out_delay_us: i32,
+    pub frames_per_trigger: i32,
+}
+
+impl SyncConfig {
+    /// The configuration hitl plays with: `mode`, one frame per trigger, no delays, and the
+    /// trigger output as asked (off for a single camera: nothing is chained to it).
+    pub fn for_run(mode: TriggerMode, trigger_out: bool) -> Self {
+        Self {
+            mode: mode.bit(),
+            depth_delay_us: 0,
+            color_delay_us: 0,
+            trigger_to_image_delay_us: 0,
+            trigger_out_enable: trigger_out,
+            trigger_out_delay_us: 0,
+            frames_per_trigger: 1,
+        }
+    }
+
+    /// Whether the camera waits for triggers in this mode (it then sends no frame on its own:
+    /// other tools see a silent camera).
+    pub fn is_triggered(&self) -> bool {
+        self.mode & (MODE_SOFTWARE_TRIGGERING | MODE_HARDWARE_TRIGGERING) != 0
+    }
+}
+
+impl fmt::Display for SyncConfig {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        write!(
+            f,
+            "{}, {} frame(s) per trigger, trigger out {}, delays: trigger to image {} us, depth \
+             {} us, colour {} us",
+            mode_names(self.mode),
+            self.frames_per_trigger,
+            if self.trigger_out_enable {
+                format!("on (+{} us)", self.trigger_out_delay_us)
+            } else {
+                "off".into()
+            },
+            self.trigger_to_image_delay_us,
+            self.depth_delay_us,
+            self.color_delay_us
+        )
+    }
+}
+
 /// How a capture starts an exposure.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub enum TriggerMode {

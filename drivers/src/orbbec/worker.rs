@@ -8,6 +8,11 @@
 //! A missed frameset is counted, not a fault; `max_consecutive_missed` misses in a row (the
 //! camera answers no trigger any more) are. Framesets older than their trigger are stale: dropped
 //! and counted.
+//!
+//! The camera is left as found: at open the worker reads the sync configuration and the settings
+//! it may change ([`SavedState`]), and a state file a crashed run left ([`super::marker`]); before
+//! it changes anything at arm it writes the state file; at close, on a fault and at shutdown it
+//! stops the streams, writes the saved state back and removes the file.
 
 use std::sync::atomic::{AtomicBool, AtomicU64, AtomicU8, Ordering};
 use std::sync::OnceLock;
@@ -21,14 +26,15 @@ use hitl_hal::{
 };
 use nix::time::{clock_gettime, ClockId};
 
-use super::backend::{CameraIdentity, CameraSdk, Setting, Stream};
+use super::backend::{CameraSdk, SavedState, Setting, Stream};
 use super::error::OrbbecError;
 use super::ffi::OB_MIDDLE_OF_EXPOSURE;
 use super::frame::{check_frameset, RawFrameset};
+use super::marker;
 use super::pairing::{Paired, Pairing};
 use super::profiles::{choose_profiles, VideoProfile};
-use super::sync::{choose_trigger, TriggerMode};
-use super::{ArmReport, FrameQueue, OrbbecOptions};
+use super::sync::{choose_trigger, SyncConfig, TriggerMode};
+use super::{ArmReport, FoundState, FrameQueue, Opened, OrbbecOptions};
 
 /// How long one wait for a frameset lasts, so commands are still answered promptly.
 const POLL_MS: u32 = 5;
@@ -37,6 +43,8 @@ const POLL_MS: u32 = 5;
 pub(super) enum Command {
     Configure(StreamConfig, Sender<Result<Intrinsics, OrbbecError>>),
     Arm(Sender<Result<ArmReport, OrbbecError>>),
+    /// Stop the streams and write the saved state back (the handle's `Lifecycle::stop`).
+    Close(Sender<Result<(), OrbbecError>>),
     Shutdown,
 }
 
@@ -155,6 +163,14 @@ struct Streaming {
 
 struct Worker<B> {
     cam: B,
+    /// What to write back when the camera is let go, and the state file that records it.
+    saved: SavedState,
+    marker: Option<std::path::PathBuf>,
+    serial: String,
+    /// The camera holds a configuration that is not `saved` (set at arm, or left by a crash).
+    restore_pending: bool,
+    /// A restore was tried after a fault (not repeated every round).
+    restore_tried_on_fault: bool,
     options: OrbbecOptions,
     shared: std::sync::Arc<Shared>,
     state: State,
@@ -203,7 +219,22 @@ impl<B: CameraSdk> Worker<B> {
         let id = self.cam.identity()?;
         let advertised = self.cam.advertised_sync_modes()?;
         let mode = choose_trigger(id.product_id, advertised, self.options.trigger)?;
-        self.cam.set_trigger_mode(mode)?;
+        // The state file first: a crash from here on is noticed at the next open.
+        if let Some(path) = &self.marker {
+            marker::write(path, &self.serial, &self.saved).map_err(|e| {
+                OrbbecError::new(
+                    ErrorKind::InvalidRequest,
+                    format!(
+                        "Orbbec camera: cannot write the state file {} that lets a crashed run be \
+                         noticed ({e}); set {} to a writable folder",
+                        path.display(),
+                        marker::STATE_DIR_ENV
+                    ),
+                )
+            })?;
+        }
+        self.restore_pending = true;
+        self.cam.set_sync_config(&SyncConfig::for_run(mode, self.options.trigger_out))?;
         // Optional on older firmware (reported); the lab check says which point the stamps mark.
         let exposure_reference_middle =
             self.cam.set(Setting::ExposureReference, OB_MIDDLE_OF_EXPOSURE)?;
@@ -226,6 +257,35 @@ impl<B: CameraSdk> Worker<B> {
             ArmReport { mode, exposure_reference_middle, global_timestamps: global, color, depth };
         self.state = State::Streaming(Streaming { mode, k, global, monotonic, report });
         Ok(report)
+    }
+
+    /// Stop the streams and write the saved state back; the state file goes once that worked.
+    /// Nothing to do when the camera holds what was found.
+    fn restore(&mut self) -> Result<(), OrbbecError> {
+        if !self.restore_pending {
+            return Ok(());
+        }
+        self.shared.armed.store(false, Ordering::Release);
+        let stopped = self.cam.stop();
+        self.state = State::Opened;
+        self.cam.set_sync_config(&self.saved.sync)?;
+        for (setting, value) in self.saved.settings.clone() {
+            self.cam.set(setting, value)?;
+        }
+        self.restore_pending = false;
+        if let Some(path) = &self.marker {
+            marker::remove(path).map_err(|e| {
+                OrbbecError::new(
+                    ErrorKind::Other,
+                    format!(
+                        "Orbbec camera: its configuration was written back, but the state file \
+                         {} could not be removed: {e}",
+                        path.display()
+                    ),
+                )
+            })?;
+        }
+        stopped
     }
 
     fn missed(&mut self, n: u32, mode: TriggerMode) {
@@ -350,19 +410,52 @@ pub(super) fn host_ns(system_us: u64, monotonic: bool, clock: &MonotonicClock) -
     clock.now_ns().saturating_sub(age_ns)
 }
 
+/// Read what the camera holds (sync configuration, the settings the driver may change) and the
+/// state file of a run that did not write its camera back: what to write back at close.
+fn save_state<B: CameraSdk>(
+    cam: &mut B,
+    serial: &str,
+    options: &OrbbecOptions,
+) -> Result<(SavedState, FoundState, Option<std::path::PathBuf>), OrbbecError> {
+    let sync = cam.sync_config()?;
+    let mut settings = Vec::new();
+    for setting in Setting::ALL {
+        if let Some(v) = cam.get(setting)? {
+            settings.push((setting, v));
+        }
+    }
+    let path = options.state_dir.as_deref().map(|d| marker::marker_path(d, serial));
+    let (leftover, marker_error) = match path.as_deref().map(marker::read) {
+        None | Some(Ok(None)) => (None, None),
+        Some(Ok(Some(l))) => (Some(l), None),
+        Some(Err(e)) => (None, Some(e)),
+    };
+    let saved = match &leftover {
+        Some(l) => l.saved.clone(),
+        None => SavedState { sync, settings },
+    };
+    Ok((saved, FoundState { sync, leftover, marker_error }, path))
+}
+
 /// The worker thread's body: open the camera with `open`, then serve commands and captures.
 pub(super) fn run<B: CameraSdk>(
     open: impl FnOnce() -> Result<B, OrbbecError>,
     options: OrbbecOptions,
     shared: std::sync::Arc<Shared>,
     commands: Receiver<Command>,
-    ready: Sender<Result<CameraIdentity, OrbbecError>>,
+    ready: Sender<Result<Opened, OrbbecError>>,
 ) {
-    let opened = open().and_then(|mut cam| cam.identity().map(|id| (cam, id)));
-    let cam = match opened {
-        Ok((cam, id)) => {
-            let _ = ready.send(Ok(id));
-            cam
+    let opened = open().and_then(|mut cam| {
+        let identity = cam.identity()?;
+        let (saved, found, path) = save_state(&mut cam, &identity.serial, &options)?;
+        Ok((cam, Opened { identity, found }, saved, path))
+    });
+    let (cam, saved, marker, serial, restore_pending) = match opened {
+        Ok((cam, opened, saved, path)) => {
+            let serial = opened.identity.serial.clone();
+            let pending = opened.found.leftover.is_some();
+            let _ = ready.send(Ok(opened));
+            (cam, saved, path, serial, pending)
         }
         Err(e) => {
             let _ = ready.send(Err(e));
@@ -373,6 +466,11 @@ pub(super) fn run<B: CameraSdk>(
     let pairing = Pairing::new(options.trigger_queue, slack_ns);
     let mut w = Worker {
         cam,
+        saved,
+        marker,
+        serial,
+        restore_pending,
+        restore_tried_on_fault: false,
         options,
         shared,
         state: State::Opened,
@@ -381,6 +479,12 @@ pub(super) fn run<B: CameraSdk>(
         last_bad: None,
     };
     loop {
+        if w.shared.faulted() && !w.restore_tried_on_fault {
+            // A fault ends the streaming for good: give the camera its configuration back now
+            // (an unplugged camera cannot take it: its state file stays for the next open).
+            w.restore_tried_on_fault = true;
+            let _ = w.restore();
+        }
         let streaming = matches!(w.state, State::Streaming(_)) && !w.shared.faulted();
         let cmd = if streaming {
             match w.commands_try(&commands) {
@@ -408,7 +512,13 @@ pub(super) fn run<B: CameraSdk>(
                 }
                 let _ = reply.send(r);
             }
-            Some(Command::Shutdown) => return,
+            Some(Command::Close(reply)) => {
+                let _ = reply.send(w.restore());
+            }
+            Some(Command::Shutdown) => {
+                let _ = w.restore();
+                return;
+            }
             None => {}
         }
     }
