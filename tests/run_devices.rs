@@ -445,6 +445,7 @@ fn a_mistyped_device_choice_fails_with_exit_2_before_anything_loads() {
         ("--perception", "icpp"),
         ("--trigger", "dmx:/dev/ttyUSB0"),
         ("--trigger", "trigger:"),
+        ("--rt-priority", "100"),
         ("--stub-fault", "estopp@1"),
     ] {
         let out = common::hitl(&["run", "/nonexistent/traj.npz", flag, value]);

@@ -48,7 +48,9 @@ pub struct BenchArgs {
     #[arg(long)]
     pub load: bool,
     /// SCHED_FIFO priority for the loop thread (0: normal scheduler).
-    #[arg(long, default_value_t = 80, value_name = "PRIO")]
+    /// 1-99: Linux's SCHED_FIFO range.
+    #[arg(long, default_value_t = 80, value_name = "PRIO",
+          value_parser = clap::value_parser!(i32).range(0..=99))]
     pub rt_priority: i32,
     /// Spin for the last N microseconds before each deadline.
     #[arg(long, default_value_t = 0, value_name = "US")]

@@ -82,7 +82,9 @@ pub struct CalibrateArgs {
     #[arg(long, default_value_t = Acceptance::default().max_rms_px, value_name = "PX")]
     pub max_rms_px: f64,
     /// SCHED_FIFO priority of the loop thread (0: normal scheduler).
-    #[arg(long, default_value_t = 80, value_name = "PRIO")]
+    /// 1-99: Linux's SCHED_FIFO range.
+    #[arg(long, default_value_t = 80, value_name = "PRIO",
+          value_parser = clap::value_parser!(i32).range(0..=99))]
     pub rt_priority: i32,
     /// Print plain progress lines even on a terminal.
     #[arg(long)]

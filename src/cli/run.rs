@@ -70,7 +70,9 @@ pub struct RunArgs {
     #[arg(long = "stub-fault", value_name = "KIND@SECONDS")]
     pub stub_faults: Vec<StubFault>,
     /// SCHED_FIFO priority of the loop thread (0: normal scheduler).
-    #[arg(long, default_value_t = 80, value_name = "PRIO")]
+    /// 1-99: Linux's SCHED_FIFO range.
+    #[arg(long, default_value_t = 80, value_name = "PRIO",
+          value_parser = clap::value_parser!(i32).range(0..=99))]
     pub rt_priority: i32,
     /// Pin the loop thread to this CPU.
     #[arg(long, value_name = "CPU")]

@@ -264,7 +264,8 @@ pub fn orbit_path(req: &PlanRequest, lab: &LabConfig) -> Result<OrbitPath, PlanE
     let duration = schedule.duration_s();
     let count = match req.waypoints {
         Some(c) => c,
-        None => (duration * DEFAULT_WAYPOINT_RATE_HZ).round() as usize + 1,
+        // Saturating: a duration of 1e300 s is refused below by the count, not by an overflow.
+        None => ((duration * DEFAULT_WAYPOINT_RATE_HZ).round() as usize).saturating_add(1),
     };
     if !(2..=MAX_WAYPOINTS).contains(&count) {
         return Err(request_error(format!(

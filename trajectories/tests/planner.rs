@@ -238,6 +238,16 @@ fn refuses_an_orbit_too_big_for_the_arm() {
     }
     let bad = PlanRequest { range_m: -1.0, ..short_flyaround() };
     assert!(matches!(planner::plan(&bad, &lab, &mut |_, _| {}), Err(PlanError::Request(_))));
+    // A duration of 1e300 s overflowed the waypoint count (a panic in debug builds).
+    let endless = PlanRequest {
+        timing: planner::Timing::DurationS(1e300),
+        waypoints: None,
+        ..short_flyaround()
+    };
+    match planner::plan(&endless, &lab, &mut |_, _| {}) {
+        Err(PlanError::Request(m)) => assert!(m.contains("waypoints"), "{m}"),
+        other => panic!("expected a refusal, got {:?}", other.map(|p| p.summary)),
+    }
 }
 
 #[test]
