@@ -25,6 +25,9 @@ pub enum Phase {
     /// and the hold at its end while the arm settles.
     #[serde(rename = "lead_out")]
     LeadOut,
+    /// After a completed run, the planned move back to the lab's rest pose and the hold there
+    /// (`hitl park` records its move as one too).
+    Retreat,
 }
 
 /// `/arm/setpoint`: the setpoint the tick sent to the arm.

@@ -66,6 +66,8 @@ pub(crate) struct Queues {
     pub frames: ArrayQueue<FrameRecord>,
     pub drops: [AtomicU64; 8],
     pub frames_not_recorded: AtomicU64,
+    /// Metadata records to write (from the session thread, never the tick): name and map.
+    pub metadata: std::sync::Mutex<Vec<(String, std::collections::BTreeMap<String, String>)>>,
     /// Set by the recorder when it stops taking messages (finished): pushes become no-ops.
     pub closed: AtomicBool,
 }
@@ -101,6 +103,7 @@ impl Telemetry {
                 frames: ArrayQueue::new(cap.frames.max(1)),
                 drops: Default::default(),
                 frames_not_recorded: AtomicU64::new(0),
+                metadata: Default::default(),
                 closed: AtomicBool::new(false),
             }),
         }
@@ -109,6 +112,14 @@ impl Telemetry {
     fn push_counted<T>(&self, q: &ArrayQueue<T>, which: Counted, m: T) {
         if q.force_push(m).is_some() {
             self.q.drops[which as usize].fetch_add(1, Ordering::Relaxed);
+        }
+    }
+
+    /// A metadata record named `name` (e.g. the run's `approach_plan`), written with the next
+    /// batch. Takes a lock and allocates: for the session thread, never the tick.
+    pub fn push_metadata(&self, name: &str, map: std::collections::BTreeMap<String, String>) {
+        if let Ok(mut pending) = self.q.metadata.lock() {
+            pending.push((name.to_string(), map));
         }
     }
 

@@ -303,6 +303,11 @@ impl Worker {
     fn drain_telemetry(&mut self) -> usize {
         let mut n = 0;
         let q = self.tel.q.clone();
+        let pending = q.metadata.lock().map(|mut m| std::mem::take(&mut *m)).unwrap_or_default();
+        for (name, map) in pending {
+            n += 1;
+            self.with_sink(|s| s.write_metadata(&name, map));
+        }
         while let Some(m) = q.setpoint.pop() {
             n += 1;
             self.last_t_ns = self.last_t_ns.max(m.t_ns);

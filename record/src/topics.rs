@@ -40,7 +40,7 @@ pub(crate) fn json_schema(topic: &str) -> Option<(&'static str, String)> {
         SETPOINT => (
             "hitl.Setpoint",
             format!(
-                r#"{{"type":"object","properties":{{"tick":{{"type":"integer"}},"t_ns":{{"type":"integer"}},"phase":{{"type":"string","enum":["approach","lead_in","playback","lead_out","stop"]}},"q":{Q7},"qd":{Q7}}},"required":["tick","t_ns","phase","q","qd"]}}"#
+                r#"{{"type":"object","properties":{{"tick":{{"type":"integer"}},"t_ns":{{"type":"integer"}},"phase":{{"type":"string","enum":["approach","lead_in","playback","lead_out","stop","retreat"]}},"q":{Q7},"qd":{Q7}}},"required":["tick","t_ns","phase","q","qd"]}}"#
             ),
         ),
         STATE => (

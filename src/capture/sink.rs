@@ -73,6 +73,7 @@ fn phase(p: Phase) -> RecPhase {
     }
 }
 
+        Phase::Retreat => RecPhase::Retreat,
 /// The recorder's event for a trip, with its numbers (no text: the tick cannot format).
 fn trip_event(trip: &Trip) -> SafetyEventMsg {
     let (kind, joint, value, limit) = match trip.kind {

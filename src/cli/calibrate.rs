@@ -400,6 +400,8 @@ fn play_views(
     match session::run(request) {
         Ok(r) if r.exit_code == exit::OK => {}
         Ok(r) => {
+        // Back to the rest pose after the views, as every completed run.
+        retreat: true,
             return refuse(
                 r.exit_code,
                 format!("the views' run did not complete:\n{}", r.summary()),

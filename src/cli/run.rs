@@ -92,6 +92,10 @@ pub struct RunArgs {
     pub live: Option<SocketAddr>,
     /// Allow a non-loopback --live address (the live view then answers anyone on that network).
     #[arg(long)]
+    /// Leave the arm where the trajectory ends. By default a completed run goes back to the lab's
+    /// rest pose (`[arm] rest_q`) along a planned, checked path, so the next run starts from rest.
+    #[arg(long)]
+    pub no_retreat: bool,
     pub allow_remote: bool,
 }
 
@@ -203,3 +207,4 @@ pub fn run(args: RunArgs, record: bool) -> u8 {
         }
     }
 }
+        retreat: !args.no_retreat,

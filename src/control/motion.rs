@@ -1,6 +1,7 @@
 //! Jerk-limited moves planned with Ruckig (the official C++ library through the `ruckig` crate):
-//! the approach from the arm's pose to the first waypoint, stops from any moving state, and the
-//! lead-in and lead-out of a trajectory that starts or ends moving ([`add_ramps`]).
+//! the approach and the retreat along a planned path of straight joint-space legs
+//! ([`plan_path`]; the path itself is `hitl_trajectories::path`'s), stops from any moving state,
+//! and the lead-in and lead-out of a trajectory that starts or ends moving ([`add_ramps`]).
 //!
 //! Both are planned whole ("offline" in Ruckig's words) and sampled at the control period into
 //! setpoints, so the tick only reads a table. Planning allocates: it runs before the loop
@@ -10,7 +11,9 @@ use super::setpoint::Setpoint;
 use hitl_hal::Joints;
 use hitl_trajectories::lab::LabConfig;
 use hitl_trajectories::timing::{JointState, SetpointTable};
-use ruckig::{ControlInterface, InputParameter, Result as RuckigResult, Ruckig, Trajectory};
+use ruckig::{
+    ControlInterface, InputParameter, Result as RuckigResult, Ruckig, Synchronization, Trajectory,
+};
 
 /// Per-joint kinematic limits for a planned move.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -82,6 +85,45 @@ pub fn plan_move(
     limits: &MoveLimits,
     dt: f64,
 ) -> Result<Vec<Setpoint>, MotionError> {
+    plan_move_synchronized(from, to, limits, dt, Synchronization::Time)
+}
+
+/// A rest-to-rest move along the straight line from `from` to `to` in joint space (Ruckig's
+/// phase synchronisation: every joint covers the same fraction of its way at every instant),
+/// sampled as [`plan_move`].
+pub fn plan_straight_move(
+    from: &Joints,
+    to: &Joints,
+    limits: &MoveLimits,
+    dt: f64,
+) -> Result<Vec<Setpoint>, MotionError> {
+    plan_move_synchronized(from, to, limits, dt, Synchronization::Phase)
+}
+
+/// A path of straight joint-space legs through `waypoints` (the first is where the arm rests),
+/// each leg a rest-to-rest [`plan_straight_move`]: the setpoints after the start, and the index
+/// (1-based, as ticks after the start) of the setpoint that ends each leg.
+pub fn plan_path(
+    waypoints: &[Joints],
+    limits: &MoveLimits,
+    dt: f64,
+) -> Result<(Vec<Setpoint>, Vec<usize>), MotionError> {
+    let mut out = Vec::new();
+    let mut ends = Vec::new();
+    for leg in waypoints.windows(2) {
+        out.extend(plan_straight_move(&leg[0], &leg[1], limits, dt)?);
+        ends.push(out.len());
+    }
+    Ok((out, ends))
+}
+
+fn plan_move_synchronized(
+    from: &Joints,
+    to: &Joints,
+    limits: &MoveLimits,
+    dt: f64,
+    synchronization: Synchronization,
+) -> Result<Vec<Setpoint>, MotionError> {
     if from.iter().chain(to.iter()).any(|v| !v.is_finite()) {
         return Err(MotionError::NotFinite);
     }
@@ -89,6 +131,7 @@ pub fn plan_move(
         return Ok(Vec::new());
     }
     let mut input = InputParameter::new(7);
+    input.synchronization = synchronization;
     input.current_position = from.to_vec();
     input.target_position = to.to_vec();
     set_limits(&mut input, limits);
@@ -316,6 +359,26 @@ mod tests {
         // 0.5 rad at 0.3 rad/s takes at least 1.67 s.
         assert!(path.len() as f64 * 0.004 > 1.67);
         assert!(plan_move(&to, &to, &limits, 0.004).expect("plan").is_empty());
+    }
+
+    #[test]
+    fn a_path_follows_straight_legs_through_its_waypoints() {
+        let a = [0.0; 7];
+        let b = [0.4, -0.2, 0.0, 0.5, 0.0, 0.1, 0.0];
+        let c = [0.4, 0.1, 0.3, 0.5, 0.0, 0.1, -0.2];
+        let limits = MoveLimits::uniform(0.3, 0.8, 8.0);
+        let (path, ends) = plan_path(&[a, b, c], &limits, 0.004).expect("plan");
+        assert_eq!(ends.len(), 2);
+        assert_eq!(path[ends[0] - 1], Setpoint::rest(b));
+        assert_eq!(path[ends[1] - 1], Setpoint::rest(c));
+        assert_eq!(ends[1], path.len());
+        // On the line a-b every sample is a + s (b - a) for one s.
+        for sp in &path[..ends[0]] {
+            let s = sp.q[0] / b[0];
+            for j in 0..7 {
+                assert!((sp.q[j] - (a[j] + s * (b[j] - a[j]))).abs() < 1e-6, "{:?}", sp.q);
+            }
+        }
     }
 
     #[test]

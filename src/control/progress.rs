@@ -8,7 +8,7 @@ use std::time::Duration;
 
 /// Follow the loop until it is done.
 pub fn follow(status: &LoopStatus, program: &Program, plain: bool) {
-    let total = (program.approach.len() + program.playback.len()) as u64;
+    let total = (program.approach.len() + program.playback.len() + program.retreat.len()) as u64;
     let bar = (!plain).then(|| {
         let bar = indicatif::ProgressBar::new(total.max(1));
         bar.set_style(

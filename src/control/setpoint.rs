@@ -44,6 +44,9 @@ pub enum Phase {
     /// From the last waypoint's motion to rest, for a trajectory that ends moving (and the hold
     /// at its end while the arm settles).
     LeadOut,
+    /// After a completed run: the planned, checked move back to the lab's rest pose (and the hold
+    /// there while the arm settles); `hitl park`'s move.
+    Retreat,
 }
 
 impl Phase {
@@ -55,6 +58,7 @@ impl Phase {
             Phase::Stop => "stop",
             Phase::LeadIn => "lead-in",
             Phase::LeadOut => "lead-out",
+            Phase::Retreat => "retreat",
         }
     }
 }

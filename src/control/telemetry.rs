@@ -96,6 +96,7 @@ impl LoopStatus {
             2 => Phase::Settle,
             4 => Phase::LeadIn,
             5 => Phase::LeadOut,
+            6 => Phase::Retreat,
             _ => Phase::Stop,
         }
     }

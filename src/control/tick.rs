@@ -47,6 +47,10 @@ pub struct Program {
     /// own. Settling after a lead-out holds its end and is recorded as lead-out.
     pub lead_in_ticks: u64,
     pub lead_out_ticks: u64,
+    /// After the playback has settled (or its settle timed out): the planned move back to the
+    /// rest pose, one setpoint per tick, then a settle on its end (empty: the arm stays where the
+    /// playback ended). Recorded as `retreat`.
+    pub retreat: Vec<Setpoint>,
 }
 
 impl Program {
@@ -101,8 +105,9 @@ pub struct Devices<A, C, L, I, G> {
 /// How a run ended.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub enum Outcome {
-    /// Played to the end and settled on the last waypoint.
-    Completed { ticks: u64, settled: bool },
+    /// Played to the end and settled on the last waypoint (`settled`: within the tolerance, not
+    /// timed out); then, when the program has a retreat, back to rest (`at_rest`: settled there).
+    Completed { ticks: u64, settled: bool, at_rest: Option<bool> },
     /// An interlock or the operator stopped it; `stopped` says the controlled stop completed.
     Tripped { trip: Trip, stopped: bool },
 }
@@ -143,6 +148,8 @@ pub struct ControlLoop<'p, A, C, L, I, G, T> {
     light_level: f32,
     captures: u32,
     device_failed: Option<Device>,
+    /// The tick the retreat started at, and whether the playback had settled before it.
+    retreat_from: Option<(u64, bool)>,
 }
 
 impl<'p, A, C, L, I, G, T> ControlLoop<'p, A, C, L, I, G, T>
@@ -181,6 +188,7 @@ where
             light_level: f32::NAN,
             captures: 0,
             device_failed: None,
+            retreat_from: None,
         }
     }
 
@@ -338,16 +346,40 @@ where
             };
             return Ok((phase, p.playback[i as usize]));
         }
-        let goal = p.playback.last().or(p.approach.last()).copied().unwrap_or(self.last_sent);
-        let settled = arm.is_some_and(|a| {
-            a.q.iter().zip(goal.q.iter()).all(|(m, c)| (m - c).abs() <= p.settle_tolerance_rad)
-        });
-        let settle_ticks = k - p.playback_end();
-        if settled || settle_ticks >= p.settle_max_ticks {
-            return Err(Outcome::Completed { ticks: k, settled });
+        let settled_on = |goal: &Setpoint| {
+            arm.is_some_and(|a| {
+                a.q.iter().zip(goal.q.iter()).all(|(m, c)| (m - c).abs() <= p.settle_tolerance_rad)
+            })
+        };
+        let (from, settled) = match self.retreat_from {
+            Some(started) => started,
+            None => {
+                let goal =
+                    p.playback.last().or(p.approach.last()).copied().unwrap_or(self.last_sent);
+                let settled = settled_on(&goal);
+                let settle_ticks = k - p.playback_end();
+                if !settled && settle_ticks < p.settle_max_ticks {
+                    let phase = if p.lead_out_ticks > 0 { Phase::LeadOut } else { Phase::Settle };
+                    return Ok((phase, Setpoint::rest(goal.q)));
+                }
+                if p.retreat.is_empty() {
+                    return Err(Outcome::Completed { ticks: k, settled, at_rest: None });
+                }
+                self.retreat_from = Some((k, settled));
+                (k, settled)
+            }
+        };
+        // The retreat, then a settle on its end.
+        let i = (k - from) as usize;
+        if let Some(sp) = p.retreat.get(i) {
+            return Ok((Phase::Retreat, *sp));
         }
-        let phase = if p.lead_out_ticks > 0 { Phase::LeadOut } else { Phase::Settle };
-        Ok((phase, Setpoint::rest(goal.q)))
+        let rest = p.retreat[p.retreat.len() - 1];
+        let at_rest = settled_on(&rest);
+        if at_rest || (i - p.retreat.len()) as u64 >= p.settle_max_ticks {
+            return Err(Outcome::Completed { ticks: k, settled, at_rest: Some(at_rest) });
+        }
+        Ok((Phase::Retreat, Setpoint::rest(rest.q)))
     }
 
     /// The stop's setpoint for tick `k`: from the plan, a bridge until it arrives, or the end.

@@ -1,11 +1,13 @@
 //! A run from start to exit code. [`run`] reads top to bottom as the steps of a run: load and
 //! preflight; start the arm's side (the embedded stub); open and start the devices; start the
 //! capture path (recorder, perception, frame intake); connect the arm, identify it, enable it;
-//! plan the approach; play on the real-time thread; stop the devices; close the capture path and
-//! the recording. Everything that allocates or blocks happens here, before or after the loop;
-//! the loop itself is [`super::tick`], which borrows the devices this module owns.
+//! plan the approach and the retreat around the lab's obstacles; play on the real-time thread;
+//! stop the devices; close the capture path and the recording. Everything that allocates or
+//! blocks happens here, before or after the loop; the loop itself is [`super::tick`], which
+//! borrows the devices this module owns.
 //!
-//! - [`prepare`]: load, time-parametrise and preflight; plan the approach by the same rules;
+//! - [`prepare`]: load, time-parametrise and preflight; plan the approach and the retreat, checked
+//!   by the same rules;
 //! - [`arm_link`]: the arm's address, identity, report reader, first report, the embedded stub;
 //! - [`devices`]: the target scene, the recorder, late frames (the devices themselves are opened
 //!   by `crate::devices`, which is the only place that names drivers);
@@ -25,6 +27,7 @@ use crate::capture::truth::LabFrames;
 use crate::control::interlocks::{Interlocks, Thresholds};
 use crate::control::motion::MoveLimits;
 use crate::control::setpoint::Setpoint;
+use crate::control::planned_move::PlannedMove;
 use crate::control::stop::StopPlanner;
 use crate::control::stop_supervisor::StopConfirmation;
 use crate::control::telemetry::LoopStatus;
@@ -47,7 +50,7 @@ use hitl_trajectories::lab::LabConfig;
 use hitl_trajectories::timing::SetpointTable;
 use hitl_trajectories::Trajectory;
 use operator::install_ctrlc;
-use prepare::{plan_approach, prepare};
+use prepare::{plan_move_between, prepare};
 use std::net::{IpAddr, SocketAddr};
 use std::path::PathBuf;
 use std::sync::atomic::{AtomicBool, Ordering};
@@ -122,6 +125,9 @@ pub struct RunRequest {
     /// Stream the run to Foxglove (`--live`; needs `record`: the recorder feeds it).
     pub live: Option<hitl_record::LiveConfig>,
 }
+    /// After a completed run, go back to the lab's rest pose (`[arm] rest_q`) along a planned,
+    /// checked path (`--no-retreat`: false, the arm stays where the trajectory ends).
+    pub retreat: bool,
 
 /// A run that could not start (nothing moved), or a device that failed before the loop.
 #[derive(Debug, thiserror::Error)]
@@ -164,6 +170,8 @@ pub struct RunReport {
     pub max_late_ns: u64,
     pub overruns: u64,
     pub rt: rt::RtReport,
+    /// Ticks of the retreat to the rest pose (0: none planned).
+    pub retreat_ticks: usize,
     /// Where the stub's arm ended (stub runs only).
     pub stub_final_q: Option<Joints>,
     pub recording: Option<PathBuf>,
@@ -183,11 +191,21 @@ pub struct RunReport {
 impl RunReport {
     pub fn summary(&self) -> String {
         let how = match self.outcome {
-            Outcome::Completed { ticks, settled } => format!(
-                "completed: {ticks} ticks ({} approach, {} playback), {}",
+            Outcome::Completed { ticks, settled, at_rest } => format!(
+                "completed: {ticks} ticks ({} approach, {} playback{}), {}{}",
                 self.approach_ticks,
                 self.playback_ticks,
-                if settled { "settled on the last waypoint" } else { "settle timed out" }
+                if self.retreat_ticks > 0 {
+                    format!(", {} retreat", self.retreat_ticks)
+                } else {
+                    String::new()
+                },
+                if settled { "settled on the last waypoint" } else { "settle timed out" },
+                match at_rest {
+                    None => "",
+                    Some(true) => ", then back at the rest pose",
+                    Some(false) => ", then retreated; the settle at the rest pose timed out",
+                }
             ),
             Outcome::Tripped { trip, stopped } => format!(
                 "stopped by {} at tick {}: {} ({})",
@@ -264,8 +282,16 @@ pub fn run(req: RunRequest) -> Result<RunReport, RunError> {
     // 5. The arm: connect, identify and preflight against its joint table, read, enable.
     let mut link = connect_arm(&req, &target, &traj, &table, clock)?;
 
-    // 6. The program: the approach from where the arm stands, then the trajectory.
-    let program = build_program(&link.first.q, &table, &link.lab)?;
+    // 6. The program: the approach from where the arm stands, the trajectory, the retreat to rest;
+    // each planned move is recorded with the run.
+    let retreat_to = req.retreat.then_some(link.lab.arm.rest_q);
+    let (program, moves) = build_program(&link.first.q, &table, &link.lab, retreat_to.as_ref())?;
+    for m in &moves {
+        crate::errln!("{}", m.describe());
+        if let Some(t) = &capture.record {
+            t.push_metadata(&format!("{}_plan", m.name), m.metadata());
+        }
+    }
     #[cfg(feature = "stub")]
     if let Some(stub) = &target.stub {
         // The `orbit` Sun at a capture's loop tick: playback starts after the approach.
@@ -608,18 +634,27 @@ fn connect_arm(
     })
 }
 
-/// The approach from `start`, then the trajectory with its captures and light schedule.
+/// The approach from `start`, then the trajectory with its captures and light schedule, then the
+/// retreat to `retreat_to` (the rest pose) when asked; with the planned moves.
 fn build_program(
     start: &Joints,
     table: &SetpointTable,
     lab: &LabConfig,
-) -> Result<Program, RunError> {
-    let approach = plan_approach(start, table, lab)?;
+    retreat_to: Option<&Joints>,
+) -> Result<(Program, Vec<PlannedMove>), RunError> {
+    let approach = plan_move_between("approach", start, &table.q[0], lab, table.rate_hz)?;
+    let retreat = match retreat_to {
+        Some(rest) => {
+            let last = table.q[table.ticks() - 1];
+            Some(plan_move_between("retreat", &last, rest, lab, table.rate_hz)?)
+        }
+        None => None,
+    };
     let mut capture = vec![false; table.ticks()];
     for c in &table.captures {
         capture[c.tick] = true;
     }
-    Ok(Program {
+    let program = Program {
         playback: (0..table.ticks())
             .map(|k| Setpoint { q: table.q[k], qd: table.qd[k], qdd: table.qdd[k] })
             .collect(),
@@ -630,8 +665,10 @@ fn build_program(
         settle_max_ticks: (2.0 * table.rate_hz) as u64,
         lead_in_ticks: table.lead_in_ticks as u64,
         lead_out_ticks: table.lead_out_ticks as u64,
-        approach,
-    })
+        approach: approach.setpoints.clone(),
+        retreat: retreat.as_ref().map(|r| r.setpoints.clone()).unwrap_or_default(),
+    };
+    Ok((program, [Some(approach), retreat].into_iter().flatten().collect()))
 }
 
 /// What the loop left.
@@ -763,3 +800,4 @@ fn report(
         live: closed.live,
     }
 }
+        retreat_ticks: program.retreat.len(),

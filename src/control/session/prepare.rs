@@ -1,9 +1,10 @@
-//! Before anything connects: the trajectory loaded, time-parametrised and preflighted, and the
-//! approach from wherever the arm stands planned and preflighted by the same rules.
+//! Before anything connects: the trajectory loaded, time-parametrised and preflighted; and the
+//! moves between rests (the approach from wherever the arm stands, the retreat to the rest pose)
+//! planned around the lab's obstacles and preflighted by the same rules.
 
 use super::{ArmTarget, RunError, RunRequest};
-use crate::control::motion::{add_ramps, plan_move, MoveLimits};
-use crate::control::setpoint::Setpoint;
+use crate::control::motion::add_ramps;
+use crate::control::planned_move::{plan_safe_move, PlannedMove};
 use hitl_hal::Joints;
 use hitl_trajectories::lab::LabConfig;
 use hitl_trajectories::timing::{SetpointTable, XARM_MAX_SERVO_RATE_HZ};
@@ -62,95 +63,27 @@ pub(super) fn prepare(req: &RunRequest) -> Result<(Trajectory, SetpointTable), R
     Ok((traj, table))
 }
 
-/// A setpoint table for a planned move, so the approach goes through the same preflight rules.
-pub(super) fn approach_table(
-    approach: &[Setpoint],
-    start: &Joints,
-    rate_hz: f64,
-) -> (Trajectory, SetpointTable) {
-    let dt = 1.0 / rate_hz;
-    let mut q = vec![*start];
-    q.extend(approach.iter().map(|s| s.q));
-    let mut qd = vec![[0.0; 7]];
-    qd.extend(approach.iter().map(|s| s.qd));
-    let mut qdd = vec![[0.0; 7]];
-    qdd.extend(approach.iter().map(|s| s.qdd));
-    let jerk = (0..qdd.len())
-        .map(|k| {
-            let prev = qdd[k.saturating_sub(1)];
-            std::array::from_fn(|j| (qdd[k][j] - prev[j]) / dt)
-        })
-        .collect();
-    let ticks = q.len();
-    let traj = Trajectory {
-        qpos: vec![*start, q[ticks - 1]],
-        t: vec![0.0, (ticks - 1).max(1) as f64 * dt],
-        ..Default::default()
-    };
-    let table = SetpointTable {
-        rate_hz,
-        dt,
-        speed_scale: 1.0,
-        time_scale: 1.0,
-        duration_s: (ticks - 1) as f64 * dt,
-        q,
-        qd,
-        qdd,
-        jerk,
-        waypoint_ticks: vec![0, ticks - 1],
-        captures: Vec::new(),
-        light: None,
-        lead_in_ticks: 0,
-        lead_out_ticks: 0,
-    };
-    (traj, table)
-}
-
-/// Plan the slow move from the arm's pose to the first waypoint and check it like a trajectory.
-///
-/// Two shapes are tried, each a chain of Ruckig rest-to-rest moves: the direct joint-space move,
-/// then one that first turns base and wrist while shoulder and elbow stay where they are (the arm
-/// keeps its reach) and extends only at the end. The first that passes every preflight rule is
-/// taken; when none does, the run is refused with the direct move's violations.
-pub(super) fn plan_approach(
-    start: &Joints,
-    table: &SetpointTable,
+/// Plan the move `name` (`approach`, `retreat`) between two rests around the lab's obstacles and
+/// check every tick of it like a trajectory ([`plan_safe_move`]); refused (exit 3) naming the
+/// obstacle in the way.
+pub(super) fn plan_move_between(
+    name: &'static str,
+    from: &Joints,
+    to: &Joints,
     lab: &LabConfig,
-) -> Result<Vec<Setpoint>, RunError> {
-    let l = &lab.limits;
-    let limits = MoveLimits::uniform(
-        l.approach_velocity_rad_s,
-        l.approach_acceleration_rad_s2,
-        l.approach_jerk_rad_s3,
-    );
-    let goal = table.q[0];
-    let mut keep_reach = goal;
-    keep_reach[1] = start[1];
-    keep_reach[3] = start[3];
-    let shapes: [&[Joints]; 2] = [&[goal], &[keep_reach, goal]];
-    let mut first_refusal = None;
-    for shape in shapes {
-        let mut path = Vec::new();
-        let mut from = *start;
-        for via in shape {
-            let leg = plan_move(&from, via, &limits, table.dt)
-                .map_err(|e| RunError::Refused(format!("approach: {e}")))?;
-            path.extend(leg);
-            from = *via;
-        }
-        if path.is_empty() {
-            return Ok(path);
-        }
-        let (traj, approach_table) = approach_table(&path, start, table.rate_hz);
-        let report = preflight::check(&traj, &approach_table, lab);
-        if report.is_safe() {
-            return Ok(path);
-        }
-        first_refusal.get_or_insert_with(|| violations(&report));
-    }
-    Err(RunError::Refused(format!(
-        "the approach from the arm's pose to the first waypoint is unsafe (move the arm nearer \
-         the trajectory's start first):\n{}",
-        first_refusal.unwrap_or_default()
-    )))
+    rate_hz: f64,
+) -> Result<PlannedMove, RunError> {
+    plan_safe_move(name, from, to, lab, rate_hz).map_err(|e| {
+        RunError::Refused(match name {
+            "approach" => format!(
+                "the approach from the arm's pose to the trajectory's first setpoint has no safe \
+                 path:\n  - {e}"
+            ),
+            "retreat" => format!(
+                "the retreat from the trajectory's last setpoint to the rest pose ([arm] rest_q) \
+                 has no safe path (--no-retreat leaves the arm where the trajectory ends):\n  - {e}"
+            ),
+            other => format!("the {other} has no safe path:\n  - {e}"),
+        })
+    })
 }
