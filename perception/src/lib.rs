@@ -21,6 +21,7 @@ pub mod pnp;
 pub mod pose;
 pub mod replay;
 pub mod reregister;
+pub mod silhouette;
 pub mod socket;
 pub mod testing;
 pub mod worker;
