@@ -8,7 +8,7 @@ use crate::compression::ChunkCompression;
 use crate::msg::{ArmStateMsg, DepthImage, FrameRecord, Phase, Plane, SetpointMsg, TimingMsg};
 use crate::recorder::{Recorder, RecorderConfig};
 use crate::RunMetadata;
-use hitl_hal::Intrinsics;
+use hitl_hal::{Intrinsics, DOF};
 use std::path::PathBuf;
 use std::time::{Duration, Instant};
 
@@ -141,13 +141,13 @@ pub fn run_bench(opts: &BenchOptions) -> Result<serde_json::Value, crate::Record
         let now = Instant::now();
         if now >= next_tick {
             let t = now_ns(now);
-            let q = [0.1 * (tick as f64 * 1e-3).sin(); 7];
+            let q = [0.1 * (tick as f64 * 1e-3).sin(); DOF];
             tel.push_setpoint(&SetpointMsg {
                 tick,
                 t_ns: t,
                 phase: Phase::Playback,
                 q,
-                qd: [0.0; 7],
+                qd: [0.0; DOF],
             });
             tel.push_state(&ArmStateMsg {
                 t_ns: t,

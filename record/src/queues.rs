@@ -214,7 +214,13 @@ mod tests {
     use hitl_hal::Intrinsics;
 
     fn sp(tick: u64) -> SetpointMsg {
-        SetpointMsg { tick, t_ns: tick, phase: Phase::Playback, q: [0.0; 7], qd: [0.0; 7] }
+        SetpointMsg {
+            tick,
+            t_ns: tick,
+            phase: Phase::Playback,
+            q: [0.0; hitl_hal::DOF],
+            qd: [0.0; hitl_hal::DOF],
+        }
     }
 
     fn frame(tick: u64) -> FrameRecord {

@@ -13,6 +13,7 @@
 use super::load::under_load;
 use crate::rt::{os, Periodic, RtOptions};
 use crossbeam::queue::ArrayQueue;
+use hitl_hal::DOF;
 use serde_json::{json, Value};
 use std::process::Command;
 use std::time::Duration;
@@ -63,7 +64,7 @@ fn sample_rust(opts: &LoopBenchOptions, ticks: usize) -> LoopSample {
                 late.push(wake.late_ns);
                 overruns += u64::from(wake.overrun);
                 // Tick-sized work: encode a setpoint, push telemetry.
-                let q = [wake.tick as f64 * 1e-6; 7];
+                let q = [wake.tick as f64 * 1e-6; DOF];
                 for (j, v) in q.iter().enumerate() {
                     buf[j * 4..j * 4 + 4].copy_from_slice(&(*v as f32).to_le_bytes());
                 }

@@ -4,7 +4,7 @@
 //! I/O, no allocation). The first trip wins; later ones are not recorded over it.
 
 use crate::exit;
-use hitl_hal::{ArmState, InputState, Joints};
+use hitl_hal::{ArmState, InputState, Joints, DOF};
 
 /// What tripped.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -234,7 +234,7 @@ impl Interlocks {
             return Some(TripKind::DoorOpen);
         }
         if s.check_deviation {
-            for j in 0..7 {
+            for j in 0..DOF {
                 let d = (arm.q[j] - s.commanded[j]).abs();
                 // NaN from the arm counts as a deviation too.
                 if d.is_nan() || d > self.thresholds.max_deviation_rad {
@@ -296,12 +296,12 @@ mod tests {
     #[test]
     fn a_fresh_matching_report_trips_nothing() {
         let arm = ArmState { received_ns: 990_000_000, ..Default::default() };
-        assert_eq!(il().check(&sense(Some(&arm), &[0.0; 7])), None);
+        assert_eq!(il().check(&sense(Some(&arm), &[0.0; DOF])), None);
     }
 
     #[test]
     fn each_condition_trips_with_its_kind_reaction_and_exit_code() {
-        let cmd = [0.0; 7];
+        let cmd = [0.0; DOF];
         let fresh = ArmState { received_ns: 990_000_000, ..Default::default() };
         let stale = ArmState { received_ns: 800_000_000, ..Default::default() };
         let t = il().check(&sense(Some(&stale), &cmd)).expect("watchdog");
@@ -345,7 +345,7 @@ mod tests {
         let mut arm = ArmState { received_ns: 990_000_000, ..Default::default() };
         arm.q[0] = f64::NAN;
         assert!(matches!(
-            il().check(&sense(Some(&arm), &[0.0; 7])),
+            il().check(&sense(Some(&arm), &[0.0; DOF])),
             Some(TripKind::Deviation { joint: 0, .. })
         ));
     }

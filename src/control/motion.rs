@@ -8,7 +8,7 @@
 //! (approach) or on the stop planner's thread (stops), never in the tick.
 
 use super::setpoint::Setpoint;
-use hitl_hal::Joints;
+use hitl_hal::{Joints, DOF};
 use hitl_trajectories::lab::LabConfig;
 use hitl_trajectories::timing::{JointState, SetpointTable};
 use ruckig::{
@@ -26,7 +26,7 @@ pub struct MoveLimits {
 impl MoveLimits {
     /// The same limits on every joint.
     pub fn uniform(velocity: f64, acceleration: f64, jerk: f64) -> Self {
-        Self { velocity: [velocity; 7], acceleration: [acceleration; 7], jerk: [jerk; 7] }
+        Self { velocity: [velocity; DOF], acceleration: [acceleration; DOF], jerk: [jerk; DOF] }
     }
 }
 
@@ -162,17 +162,17 @@ pub fn plan_stop(
     input.current_position = from.q.to_vec();
     input.current_velocity = from.qd.to_vec();
     // Ruckig needs the current acceleration within its limit.
-    input.current_acceleration = (0..7)
+    input.current_acceleration = (0..DOF)
         .map(|j| from.qdd[j].clamp(-limits.acceleration[j], limits.acceleration[j]))
         .collect();
-    input.target_velocity = vec![0.0; 7];
-    input.target_acceleration = vec![0.0; 7];
+    input.target_velocity = vec![0.0; DOF];
+    input.target_acceleration = vec![0.0; DOF];
     set_limits(&mut input, limits);
     let trajectory = calculate(&mut input)?;
     let n = sample_into(&trajectory, dt, out)?;
     // Come to rest exactly where the plan ends.
-    out[n - 1].qd = [0.0; 7];
-    out[n - 1].qdd = [0.0; 7];
+    out[n - 1].qd = [0.0; DOF];
+    out[n - 1].qdd = [0.0; DOF];
     Ok(n)
 }
 
@@ -211,8 +211,8 @@ fn to_rest(state: &JointState, limits: &MoveLimits) -> Result<Trajectory, Motion
     input.current_position = state.q.to_vec();
     input.current_velocity = state.qd.to_vec();
     input.current_acceleration = state.qdd.to_vec();
-    input.target_velocity = vec![0.0; 7];
-    input.target_acceleration = vec![0.0; 7];
+    input.target_velocity = vec![0.0; DOF];
+    input.target_acceleration = vec![0.0; DOF];
     set_limits(&mut input, limits);
     calculate(&mut input)
 }
@@ -261,8 +261,8 @@ pub fn plan_lead_in(
         s.qd = s.qd.map(|v| -v);
     }
     // Start exactly at rest.
-    out[0].qd = [0.0; 7];
-    out[0].qdd = [0.0; 7];
+    out[0].qd = [0.0; DOF];
+    out[0].qdd = [0.0; DOF];
     Ok(out)
 }
 
@@ -283,8 +283,8 @@ pub fn plan_lead_out(
     }
     let mut out = sample_at(&stop, (1..=steps).map(|m| m as f64 * dt));
     let last = out.len() - 1;
-    out[last].qd = [0.0; 7];
-    out[last].qdd = [0.0; 7];
+    out[last].qd = [0.0; DOF];
+    out[last].qdd = [0.0; DOF];
     Ok(out)
 }
 
@@ -318,7 +318,7 @@ mod tests {
         assert!(lead_in[0].at_rest() && lead_out[lead_out.len() - 1].at_rest());
         // One tick of constant jerk at most separates each ramp from the state it meets.
         let within = |s: &JointState, t: f64| {
-            (0..7).all(|j| {
+            (0..DOF).all(|j| {
                 let p = s.q[j] + s.qd[j] * t + 0.5 * s.qdd[j] * t * t;
                 (p - state.q[j]).abs() <= 48.0 * dt.powi(3) / 6.0 * 1.01 + 1e-12
                     && (s.qd[j] + s.qdd[j] * t - state.qd[j]).abs()
@@ -331,7 +331,7 @@ mod tests {
         // Within the limits on every sample, and continuous in acceleration.
         for ramp in [&lead_in, &lead_out] {
             for w in ramp.windows(2) {
-                for j in 0..7 {
+                for j in 0..DOF {
                     assert!(w[1].qd[j].abs() <= 0.8 + 1e-9);
                     assert!(w[1].qdd[j].abs() <= 3.2 + 1e-9);
                     assert!((w[1].qdd[j] - w[0].qdd[j]).abs() <= 48.0 * dt * 1.0001 + 1e-12);
@@ -343,7 +343,7 @@ mod tests {
 
     #[test]
     fn a_move_ends_on_its_goal_within_limits() {
-        let from = [0.0; 7];
+        let from = [0.0; DOF];
         let to = [0.3, -0.2, 0.0, 0.5, 0.0, 0.1, 0.0];
         let limits = MoveLimits::uniform(0.3, 0.8, 8.0);
         let path = plan_move(&from, &to, &limits, 0.004).expect("plan");
@@ -363,7 +363,7 @@ mod tests {
 
     #[test]
     fn a_path_follows_straight_legs_through_its_waypoints() {
-        let a = [0.0; 7];
+        let a = [0.0; DOF];
         let b = [0.4, -0.2, 0.0, 0.5, 0.0, 0.1, 0.0];
         let c = [0.4, 0.1, 0.3, 0.5, 0.0, 0.1, -0.2];
         let limits = MoveLimits::uniform(0.3, 0.8, 8.0);
@@ -375,7 +375,7 @@ mod tests {
         // On the line a-b every sample is a + s (b - a) for one s.
         for sp in &path[..ends[0]] {
             let s = sp.q[0] / b[0];
-            for j in 0..7 {
+            for j in 0..DOF {
                 assert!((sp.q[j] - (a[j] + s * (b[j] - a[j]))).abs() < 1e-6, "{:?}", sp.q);
             }
         }
@@ -384,16 +384,16 @@ mod tests {
     #[test]
     fn a_stop_brings_velocity_to_zero_smoothly() {
         let from =
-            Setpoint { q: [0.0; 7], qd: [1.0, -0.5, 0.0, 0.2, 0.0, 0.0, 0.0], qdd: [0.0; 7] };
+            Setpoint { q: [0.0; DOF], qd: [1.0, -0.5, 0.0, 0.2, 0.0, 0.0, 0.0], qdd: [0.0; DOF] };
         let limits = MoveLimits::uniform(1.0, 4.0, 60.0);
         let mut out = vec![Setpoint::default(); 1000];
         let n = plan_stop(&from, &limits, 0.004, &mut out).expect("stop");
-        assert_eq!(out[n - 1].qd, [0.0; 7]);
+        assert_eq!(out[n - 1].qd, [0.0; DOF]);
         // Joint 1 keeps moving forward while it brakes, and stops in well under a second.
         assert!(out[n - 1].q[0] > 0.0 && out[n - 1].q[0] < 0.5, "{}", out[n - 1].q[0]);
         assert!((n as f64) * 0.004 < 0.6);
         for w in out[..n].windows(2) {
-            for j in 0..7 {
+            for j in 0..DOF {
                 let dqd = (w[1].qd[j] - w[0].qd[j]).abs();
                 assert!(dqd <= 4.0 * 0.004 + 1e-6, "acceleration limit");
             }
@@ -403,8 +403,8 @@ mod tests {
     #[test]
     fn non_finite_inputs_are_refused() {
         let limits = MoveLimits::uniform(1.0, 4.0, 60.0);
-        let mut bad = [0.0; 7];
+        let mut bad = [0.0; DOF];
         bad[2] = f64::NAN;
-        assert_eq!(plan_move(&bad, &[0.0; 7], &limits, 0.004), Err(MotionError::NotFinite));
+        assert_eq!(plan_move(&bad, &[0.0; DOF], &limits, 0.004), Err(MotionError::NotFinite));
     }
 }

@@ -1,6 +1,6 @@
 //! A commanded joint state, and the phase of the run it belongs to.
 
-use hitl_hal::Joints;
+use hitl_hal::{Joints, DOF};
 
 /// Position, velocity and acceleration commanded for one tick.
 #[derive(Debug, Clone, Copy, PartialEq, Default)]
@@ -13,14 +13,14 @@ pub struct Setpoint {
 impl Setpoint {
     /// At rest at `q`.
     pub fn rest(q: Joints) -> Self {
-        Self { q, qd: [0.0; 7], qdd: [0.0; 7] }
+        Self { q, qd: [0.0; DOF], qdd: [0.0; DOF] }
     }
 
     /// Where this setpoint goes in `dt` seconds at constant acceleration: a bridge of a tick or
     /// two while a stop plan is being made.
     pub fn extrapolate(&self, dt: f64) -> Self {
         let mut next = *self;
-        for j in 0..7 {
+        for j in 0..DOF {
             next.q[j] = self.q[j] + self.qd[j] * dt + 0.5 * self.qdd[j] * dt * dt;
             next.qd[j] = self.qd[j] + self.qdd[j] * dt;
         }

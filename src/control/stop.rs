@@ -124,7 +124,11 @@ mod tests {
     fn a_request_comes_back_as_a_plan_indexed_by_tick() {
         let limits = MoveLimits::uniform(1.0, 4.0, 60.0);
         let (_planner, requester) = StopPlanner::start(limits, 0.004, 5.0).expect("start");
-        let from = Setpoint { q: [0.1; 7], qd: [0.5; 7], qdd: [0.0; 7] };
+        let from = Setpoint {
+            q: [0.1; hitl_hal::DOF],
+            qd: [0.5; hitl_hal::DOF],
+            qdd: [0.0; hitl_hal::DOF],
+        };
         requester.request(StopRequest { from, from_tick: 100 });
         let plan = (0..500)
             .find_map(|_| {
@@ -136,7 +140,7 @@ mod tests {
         assert!(plan.at(100).is_none(), "sample 0 is for the tick after the trip");
         let first = plan.at(101).expect("first sample");
         assert!(first.q[0] > 0.1 && first.q[0] < 0.1 + 0.5 * 0.004 + 1e-6);
-        assert_eq!(plan.last().expect("end").qd, [0.0; 7]);
+        assert_eq!(plan.last().expect("end").qd, [0.0; hitl_hal::DOF]);
         assert!(plan.at(101 + plan.len() as u64).is_none());
     }
 }

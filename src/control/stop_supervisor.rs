@@ -158,7 +158,7 @@ mod tests {
             }
         }
         fn joint_positions(&mut self) -> Result<Joints, Failed> {
-            Ok([0.0; 7])
+            Ok([0.0; hitl_hal::DOF])
         }
         fn codes(&mut self) -> Result<(u8, u8), Failed> {
             Ok((0, 0))

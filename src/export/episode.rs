@@ -7,7 +7,7 @@
 //! frame by frame, by [`crate::export::video`].
 
 use super::ExportError;
-use hitl_hal::Pose;
+use hitl_hal::{Pose, DOF};
 use hitl_record::reader::{self, CalibrationError, Recording};
 use hitl_record::topics;
 use std::collections::{BTreeMap, BTreeSet};
@@ -56,9 +56,9 @@ pub struct Frame {
     /// The tick that fired the trigger, when the recording says.
     pub tick: Option<u64>,
     /// Measured joints nearest the exposure (`/arm/state`), radians.
-    pub state_q: [f64; 7],
+    pub state_q: [f64; DOF],
     /// Commanded joints of the capture's tick (`/arm/setpoint`), radians.
-    pub action_q: [f64; 7],
+    pub action_q: [f64; DOF],
     /// `base_T_camera` (OpenCV camera axes), from the capture's `/tf`.
     pub camera_pose: Option<Pose>,
     /// `camera_T_target`, ground truth.
@@ -251,7 +251,7 @@ fn exact<T>(v: &[T], t: u64, key: impl Fn(&T) -> u64) -> Option<&T> {
 }
 
 fn frame_at(rec: &Recording, intrinsics: &BTreeMap<u64, [f64; 4]>, t: u64) -> Frame {
-    let nan7 = [f64::NAN; 7];
+    let nan7 = [f64::NAN; DOF];
     let tick = exact(&rec.capture_sync, t, |s| s.exposure_ns)
         .or_else(|| rec.capture_sync.iter().find(|s| s.exposure_ns == t))
         .map(|s| s.tick);

@@ -18,6 +18,7 @@ use super::tables::{tasks_table, Column, Table};
 use super::video::{self, DepthQuant};
 use super::{io_err, ExportError};
 use hitl_hal::pose::{self, Pose};
+use hitl_hal::DOF;
 use serde_json::{json, Map, Value};
 use std::collections::BTreeSet;
 use std::path::{Path, PathBuf};
@@ -29,7 +30,7 @@ pub const DEPTH_KEY: &str = "observation.images.depth";
 pub const MASK_KEY: &str = "observation.images.mask";
 const DATA_PATH: &str = "data/chunk-{chunk_index:03d}/file-{file_index:03d}.parquet";
 const VIDEO_PATH: &str = "videos/{video_key}/chunk-{chunk_index:03d}/file-{file_index:03d}.mp4";
-const JOINTS: [&str; 7] = ["joint1", "joint2", "joint3", "joint4", "joint5", "joint6", "joint7"];
+const JOINTS: [&str; DOF] = ["joint1", "joint2", "joint3", "joint4", "joint5", "joint6", "joint7"];
 const POSE: [&str; 7] = ["x", "y", "z", "qx", "qy", "qz", "qw"];
 /// `meta/hitl.json`'s `generator` starts with this: the marker [`recognise_dataset`] looks for.
 pub const GENERATOR: &str = "hitl export lerobot";
@@ -469,7 +470,7 @@ fn frames_table(episodes: &[Episode], tasks: &[String], fps: u32) -> (Table, Map
         t.push(name, c);
         ft.insert(name.to_string(), f);
     };
-    let to32 = |q: [f64; 7]| q.map(|v| v as f32).to_vec();
+    let to32 = |q: [f64; DOF]| q.map(|v| v as f32).to_vec();
     add(
         "observation.state",
         Column::F32s(7, rows(&|f| to32(f.state_q))),

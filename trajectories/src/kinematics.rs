@@ -11,11 +11,8 @@ use hitl_hal::Pose;
 use nalgebra::{Isometry3, Point3, Translation3, UnitQuaternion, Vector3};
 use std::f64::consts::{FRAC_PI_2, PI};
 
-/// Number of joints.
-pub const DOF: usize = 7;
-
-/// Joint positions, radians.
-pub type Joints = [f64; DOF];
+/// The joint count and joint positions are the hal's (one `DOF` in the workspace).
+pub use hitl_hal::{Joints, DOF};
 
 /// Each body's offset in its parent: translation (m) and rotation about the parent's x (rad).
 pub const CHAIN: [([f64; 3], f64); DOF] = [

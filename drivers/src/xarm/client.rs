@@ -18,7 +18,7 @@ use super::codec::{
 use super::error::XarmError;
 use super::framing::FrameAccumulator;
 use super::registers::{self as reg, arm_state};
-use hitl_hal::{Arm, ErrorType, Joints};
+use hitl_hal::{Arm, ErrorType, Joints, DOF};
 use socket2::{Domain, Protocol, SockRef, Socket, TcpKeepalive, Type};
 use std::io::{self, Write};
 use std::net::{SocketAddr, ToSocketAddrs};
@@ -516,7 +516,7 @@ impl Arm for XarmClient {
 
     fn joint_positions(&mut self) -> Result<Joints, XarmError> {
         let r = self.request(reg::GET_JOINT_POS, &[])?;
-        let mut q = [0.0; 7];
+        let mut q = [0.0; DOF];
         codec::read_f32s(r.data(), reg::GET_JOINT_POS, &mut q)?;
         Ok(q)
     }

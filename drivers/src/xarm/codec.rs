@@ -13,7 +13,7 @@
 //! return [`CodecError`] on anything malformed; they never panic, whatever the bytes.
 
 use super::registers;
-use hitl_hal::Joints;
+use hitl_hal::{Joints, DOF};
 
 /// Protocol id of the private protocol the SDK speaks.
 pub const PROTOCOL_PRIVATE: u16 = 0x0002;
@@ -266,7 +266,7 @@ pub fn read_f32s(data: &[u8], register: u8, out: &mut [f64]) -> Result<(), Codec
 
 /// Joints from a get_joint_pos (42) reply.
 pub fn decode_joints(reply: &Reply<'_>) -> Result<Joints, CodecError> {
-    let mut q = [0.0; 7];
+    let mut q = [0.0; DOF];
     read_f32s(reply.data, reply.register, &mut q)?;
     Ok(q)
 }

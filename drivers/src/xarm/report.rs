@@ -6,7 +6,7 @@
 //! big-endian, floats little-endian f32. Offsets follow the official SDK's report structures.
 
 use super::codec::CodecError;
-use hitl_hal::Joints;
+use hitl_hal::{Joints, DOF};
 
 /// Smallest report a box sends (30003 before firmware 1.8; our decoder needs the joints).
 pub const MIN_REPORT_LEN: usize = 87;
@@ -191,7 +191,7 @@ pub fn decode_report(frame: &[u8], kind: ReportKind) -> Result<ReportData, Codec
         r.warn_code = frame[90];
     }
     if kind == ReportKind::Rich && size >= 288 {
-        let speeds: [f64; 7] = f32s(frame, 256);
+        let speeds: [f64; DOF] = f32s(frame, 256);
         r.qd = speeds;
         r.counter = u32::from_be_bytes([frame[284], frame[285], frame[286], frame[287]]);
     }
@@ -207,7 +207,7 @@ pub struct BoxIdentity<'a> {
     /// Firmware version text, at most 30 bytes.
     pub version: &'a str,
     /// Joint limits as [min, max] pairs, rad (reduced-mode joint ranges).
-    pub joint_limits: [(f64, f64); 7],
+    pub joint_limits: [(f64, f64); DOF],
 }
 
 /// Write a report of `kind` into `out`; returns its length ([`ReportKind::frame_len`]).
@@ -271,7 +271,7 @@ pub fn encode_report(
     put_f32s(out, 256, &r.qd);
     out[284..288].copy_from_slice(&r.counter.to_be_bytes());
     // Joint voltages x100 (48 V bus).
-    for j in 0..7 {
+    for j in 0..DOF {
         out[341 + 2 * j..343 + 2 * j].copy_from_slice(&4800u16.to_be_bytes());
     }
     put_f32s(out, 482, &r.tcp_pose[3..6]);
@@ -291,15 +291,15 @@ mod tests {
             robot_type: 7,
             axis: 7,
             version: "7,7,XS1303,XX1303,v2.5.0",
-            joint_limits: [(-1.0, 1.0); 7],
+            joint_limits: [(-1.0, 1.0); DOF],
         };
         let r = ReportData {
             state: 2,
             mode: 1,
             cmd_num: 3,
             q: [0.1, 0.2, 0.3, 0.4, 0.5, 0.6, 0.7],
-            qd: [0.01; 7],
-            target_q: [0.15; 7],
+            qd: [0.01; DOF],
+            target_q: [0.15; DOF],
             tcp_pose: [200.0, 0.0, 100.0, 3.1, 0.0, 0.0],
             error_code: 23,
             warn_code: 0,
@@ -314,7 +314,7 @@ mod tests {
             assert_eq!(report_frame_len(&buf[..n]), Ok(Some(n)));
             let d = decode_report(&buf[..n], kind).expect("decodes");
             assert_eq!((d.state, d.mode), (2, 1));
-            for j in 0..7 {
+            for j in 0..DOF {
                 assert!((d.q[j] - r.q[j]).abs() < 1e-6);
             }
             if kind.has_codes() {
@@ -333,7 +333,7 @@ mod tests {
             robot_type: 7,
             axis: 7,
             version: "v2.5.0",
-            joint_limits: [(-1.0, 1.0); 7],
+            joint_limits: [(-1.0, 1.0); DOF],
         };
         let r = ReportData { state: 2, mode: 1, ..ReportData::default() };
         let mut buf = [0u8; MAX_REPORT_LEN];

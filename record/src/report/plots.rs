@@ -2,6 +2,7 @@
 
 use crate::reader::Recording;
 use crate::report::summary::{pose_errors, secs, t0, tracking_errors};
+use hitl_hal::DOF;
 use plotters::coord::Shift;
 use plotters::prelude::*;
 use std::ops::Range;
@@ -85,11 +86,11 @@ pub fn joints(rec: &Recording, out: &Path) -> Res {
     let t0 = t0(rec);
     let root = SVGBackend::new(out, (1000, 1400)).into_drawing_area();
     root.fill(&WHITE).map_err(err)?;
-    let sp: Vec<(f64, [f64; 7])> = thin(
+    let sp: Vec<(f64, [f64; DOF])> = thin(
         &rec.setpoints.iter().map(|s| (secs(s.t_ns, t0), s.q)).collect::<Vec<_>>(),
         MAX_POINTS,
     );
-    let st: Vec<(f64, [f64; 7])> =
+    let st: Vec<(f64, [f64; DOF])> =
         thin(&rec.states.iter().map(|s| (secs(s.t_ns, t0), s.q)).collect::<Vec<_>>(), MAX_POINTS);
     let xs = span(sp.iter().chain(st.iter()).map(|p| p.0));
     let events = event_times(rec);

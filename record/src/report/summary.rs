@@ -2,6 +2,7 @@
 
 use crate::reader::Recording;
 use crate::topics;
+use hitl_hal::DOF;
 use serde::Serialize;
 use std::collections::BTreeMap;
 
@@ -96,6 +97,10 @@ pub struct Summary {
     pub events: Vec<EventLine>,
     pub trajectory_sha256: Option<String>,
     pub scale: Option<String>,
+    /// The paper's calibrated pose metrics and the symmetry-aware ones (`hitl eval --json`'s
+    /// keys), when the report was given a scorer (set by the report, not by [`summarize`]).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub pose_metrics: Option<serde_json::Value>,
     /// The captures on the report's contact sheet (set by the report, not by [`summarize`]).
     #[serde(skip_serializing_if = "Option::is_none")]
     pub contact_sheet: Option<crate::report::contact::ContactSheet>,
@@ -120,7 +125,7 @@ pub(crate) fn secs(t: u64, t0: u64) -> f64 {
 
 /// Per measured report: (time s, per-joint error rad) against the latest setpoint at or
 /// before it.
-pub fn tracking_errors(rec: &Recording) -> Vec<(f64, [f64; 7])> {
+pub fn tracking_errors(rec: &Recording) -> Vec<(f64, [f64; DOF])> {
     let t0 = t0(rec);
     let sp = &rec.setpoints;
     rec.states
@@ -128,7 +133,7 @@ pub fn tracking_errors(rec: &Recording) -> Vec<(f64, [f64; 7])> {
         .filter_map(|s| {
             let i = sp.partition_point(|p| p.t_ns <= s.t_ns);
             let p = sp.get(i.checked_sub(1)?)?;
-            let e: [f64; 7] = std::array::from_fn(|j| s.q[j] - p.q[j]);
+            let e: [f64; DOF] = std::array::from_fn(|j| s.q[j] - p.q[j]);
             Some((secs(s.t_ns, t0), e))
         })
         .collect()
@@ -191,11 +196,11 @@ pub fn summarize(rec: &Recording) -> Summary {
     let errs = tracking_errors(rec);
     let tracking = (!errs.is_empty()).then(|| {
         let n = errs.len() as f64;
-        let rms = (0..7)
+        let rms = (0..DOF)
             .map(|j| (errs.iter().map(|(_, e)| e[j] * e[j]).sum::<f64>() / n).sqrt())
             .collect();
         let max: Vec<f64> =
-            (0..7).map(|j| errs.iter().map(|(_, e)| e[j].abs()).fold(0.0, f64::max)).collect();
+            (0..DOF).map(|j| errs.iter().map(|(_, e)| e[j].abs()).fold(0.0, f64::max)).collect();
         Tracking {
             samples: errs.len(),
             rms_rad: rms,
@@ -246,6 +251,7 @@ pub fn summarize(rec: &Recording) -> Summary {
             .collect(),
         trajectory_sha256: run.and_then(|m| m.get("trajectory_sha256").cloned()),
         scale: run.and_then(|m| m.get("scale").cloned()),
+        pose_metrics: None,
         contact_sheet: None,
     }
 }

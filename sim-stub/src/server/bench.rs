@@ -8,7 +8,7 @@ use super::{Stub, StubConfig, StubError};
 use crate::plant::Plant;
 use hitl_drivers::xarm::report::ReportKind;
 use hitl_drivers::xarm::{ClientConfig, ServoReplies, XarmClient, XarmError};
-use hitl_hal::Arm;
+use hitl_hal::{Arm, DOF};
 use serde_json::{json, Value};
 use std::time::{Duration, Instant};
 
@@ -130,7 +130,7 @@ impl Plant for Follower {
         self.0
     }
     fn velocities(&self) -> hitl_hal::Joints {
-        [0.0; 7]
+        [0.0; DOF]
     }
     fn command(&mut self, q: &hitl_hal::Joints) {
         self.0 = *q;

@@ -21,7 +21,7 @@ use crate::faults::{Fault, FaultKind, SimInputs, SimInputsReader};
 use crate::plant::Plant;
 use arm_box::{ArmBox, BoxIdentityConfig, BoxStatus, IdentityError};
 use hitl_drivers::xarm::report::ReportKind;
-use hitl_hal::Joints;
+use hitl_hal::{Joints, DOF};
 use std::net::{IpAddr, Ipv4Addr, SocketAddr, TcpListener};
 use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
 use std::sync::{Arc, Mutex, MutexGuard};
@@ -61,7 +61,7 @@ pub struct StubConfig {
     pub identity: BoxIdentityConfig,
     /// Joint limits the box enforces on servo_j and move_joint targets; `None`: the table of
     /// the arm `identity` names (as the firmware and the official SDK pick it).
-    pub joint_limits: Option<[(f64, f64); 7]>,
+    pub joint_limits: Option<[(f64, f64); DOF]>,
     /// Commands the command port handles per second at most, over all connections (a box
     /// receives at most 250); `None` only for benchmarks of the client itself.
     pub max_command_rate_hz: Option<f64>,
@@ -148,7 +148,7 @@ impl StubConfig {
     }
 
     /// The joint limits the box enforces: the configured ones, else the serial number's table.
-    pub fn effective_joint_limits(&self) -> [(f64, f64); 7] {
+    pub fn effective_joint_limits(&self) -> [(f64, f64); DOF] {
         self.joint_limits.unwrap_or_else(|| {
             hitl_trajectories::joint_table::JointTable::for_serial(&self.identity.arm_sn).limits()
         })
