@@ -26,6 +26,9 @@ enum Command {
     Check(cli::check::CheckArgs),
     /// Serve the MuJoCo stub of arm, camera and light on loopback (xArm protocol).
     Stub(cli::stub::StubArgs),
+    /// Bring the arm to the lab's rest pose along a planned, checked path (the embedded stub unless
+    /// --arm is given).
+    Park(cli::park::ParkArgs),
     /// Play a trajectory with every interlock armed (the embedded stub unless --arm is given).
     Run(cli::run::RunArgs),
     /// `hitl run` with a recording: the same flags, and a default file under runs/.
@@ -60,6 +63,7 @@ fn main() -> ExitCode {
         Command::Plan(args) => cli::plan::run(args),
         Command::Check(args) => cli::check::run(args),
         Command::Stub(args) => cli::stub::run(args),
+        Command::Park(args) => cli::park::run(args),
         Command::Run(args) => cli::run::run(args, false),
         Command::Record(args) => cli::run::run(args, true),
         Command::Report(args) => cli::report::run(args),

@@ -153,9 +153,10 @@ impl SilhouetteRenderer {
         let mut silhouette_px = 0;
         for v in bx.v0..=bx.v1 {
             let row = v * w;
-            for i in row + bx.u0..=row + bx.u1 {
-                if self.owner[i] == 1 {
-                    mask[i] = TARGET;
+            let span = row + bx.u0..=row + bx.u1;
+            for (m, &o) in mask[span.clone()].iter_mut().zip(&self.owner[span]) {
+                if o == 1 {
+                    *m = TARGET;
                     silhouette_px += 1;
                 }
             }

@@ -70,10 +70,10 @@ fn phase(p: Phase) -> RecPhase {
         Phase::Stop => RecPhase::Stop,
         Phase::LeadIn => RecPhase::LeadIn,
         Phase::LeadOut => RecPhase::LeadOut,
+        Phase::Retreat => RecPhase::Retreat,
     }
 }
 
-        Phase::Retreat => RecPhase::Retreat,
 /// The recorder's event for a trip, with its numbers (no text: the tick cannot format).
 fn trip_event(trip: &Trip) -> SafetyEventMsg {
     let (kind, joint, value, limit) = match trip.kind {

@@ -394,14 +394,15 @@ fn play_views(
             cpu: None,
             spin: Duration::ZERO,
         },
+        // Back to the rest pose after the views, as every completed run.
+        retreat: true,
+        park: false,
         plain_progress: args.plain || !std::io::stderr().is_terminal(),
         live: None,
     };
     match session::run(request) {
         Ok(r) if r.exit_code == exit::OK => {}
         Ok(r) => {
-        // Back to the rest pose after the views, as every completed run.
-        retreat: true,
             return refuse(
                 r.exit_code,
                 format!("the views' run did not complete:\n{}", r.summary()),

@@ -2,10 +2,15 @@
 //! at the playback rate and speed scale (with the lead-in and lead-out of a file that starts or
 //! ends moving), runs every preflight rule at every tick, and prints a short report (or one JSON
 //! object). A file refused only for velocity, acceleration, jerk or step gets the largest
-//! `--speed-scale` that passes, confirmed by a second preflight. Exit 0 safe, 3 valid but unsafe,
-//! 2 bad file, flags or config. `hitl run` applies the same rules before anything moves.
+//! `--speed-scale` that passes, confirmed by a second preflight. Then the moves between rests a
+//! run makes around it: the approach from the lab's rest pose (`[arm] rest_q`, or `--from Q`) to
+//! the first setpoint and the retreat from the last back to rest, each planned around the lab's
+//! obstacles and checked tick by tick (length, duration, nearest obstacle); a move with no safe
+//! path refuses the file. Exit 0 safe, 3 valid but unsafe, 2 bad file, flags or config. `hitl run`
+//! applies the same rules before anything moves.
 
 use crate::control::motion::{add_ramps, MotionError};
+use crate::control::planned_move::{plan_safe_move, PlannedMove};
 use crate::devices::CameraSpec;
 use crate::exit;
 use hitl_trajectories::lab::LabConfig;
@@ -43,9 +48,99 @@ pub struct CheckArgs {
     /// captures are refused with a --speed-scale remedy. Without it, no camera rule applies.
     #[arg(long, value_name = "sim|orbbec[:hardware|:software]|none")]
     pub camera: Option<CameraSpec>,
+    /// Plan and check the approach from these joints (7 comma-separated radians) instead of the
+    /// lab's rest pose (`[arm] rest_q`): where the arm will be when the run starts.
+    #[arg(long, value_name = "Q", value_parser = parse_joints, allow_hyphen_values = true)]
+    pub from: Option<[f64; 7]>,
     /// Print one JSON object (the full report, or an `error`) instead of the human report.
     #[arg(long)]
     pub json: bool,
+}
+
+/// Seven comma-separated joint angles, radians: `--from`.
+pub fn parse_joints(s: &str) -> Result<[f64; 7], String> {
+    let parts: Vec<&str> = s.split(',').collect();
+    if parts.len() != 7 {
+        return Err(format!("'{s}': expected 7 comma-separated joint angles in radians"));
+    }
+    let mut q = [0.0; 7];
+    for (v, p) in q.iter_mut().zip(parts) {
+        *v = p
+            .trim()
+            .parse::<f64>()
+            .ok()
+            .filter(|x| x.is_finite())
+            .ok_or_else(|| format!("'{s}': {p:?} is not a finite number"))?;
+    }
+    Ok(q)
+}
+
+/// The moves a run makes around the trajectory, planned and checked: the approach from `from` to
+/// the first setpoint and the retreat from the last to the lab's rest pose. Each is the plan, or
+/// why it cannot be made.
+pub fn plan_moves(
+    table: &SetpointTable,
+    lab: &LabConfig,
+    from: &[f64; 7],
+) -> [(&'static str, Result<PlannedMove, String>); 2] {
+    let last = table.q[table.ticks() - 1];
+    let plan = |name, a: &[f64; 7], b: &[f64; 7]| {
+        plan_safe_move(name, a, b, lab, table.rate_hz).map_err(|e| e.to_string())
+    };
+    [
+        ("approach", plan("approach", from, &table.q[0])),
+        ("retreat", plan("retreat", &last, &lab.arm.rest_q)),
+    ]
+}
+
+/// Where `from` is, for people: the rest pose or the joints given.
+fn from_name(from: Option<&[f64; 7]>) -> String {
+    match from {
+        None => "the rest pose ([arm] rest_q)".into(),
+        Some(q) => {
+            format!("--from {}", q.iter().map(|v| format!("{v}")).collect::<Vec<_>>().join(","))
+        }
+    }
+}
+
+/// The moves' lines for people, and whether all can be made.
+pub fn describe_moves(
+    moves: &[(&'static str, Result<PlannedMove, String>)],
+    from: Option<&[f64; 7]>,
+) -> (String, bool) {
+    let mut s = String::new();
+    let mut ok = true;
+    for (name, m) in moves {
+        let what = match *name {
+            "approach" => format!("approach from {}", from_name(from)),
+            _ => "retreat to the rest pose".to_string(),
+        };
+        match m {
+            Ok(m) => {
+                let line = m.describe();
+                let rest = line.split_once(": ").map_or(line.as_str(), |(_, r)| r);
+                let _ = writeln!(s, "  {what}: {rest}");
+            }
+            Err(e) => {
+                ok = false;
+                let _ = writeln!(s, "  {what}: NO SAFE PATH: {e}");
+            }
+        }
+    }
+    (s, ok)
+}
+
+/// The moves as JSON: each plan, or `{"error"}`.
+pub fn moves_json(moves: &[(&'static str, Result<PlannedMove, String>)]) -> serde_json::Value {
+    let mut v = serde_json::Map::new();
+    for (name, m) in moves {
+        let value = match m {
+            Ok(m) => m.to_json(),
+            Err(e) => serde_json::json!({ "error": e }),
+        };
+        v.insert((*name).to_string(), value);
+    }
+    serde_json::Value::Object(v)
 }
 
 /// A loaded trajectory, its setpoint table and its preflight report.
@@ -163,15 +258,18 @@ pub fn load_and_check(
 }
 
 pub fn run(args: CheckArgs) -> u8 {
+    let mut lab_used = LabConfig::default();
     let checked = load_lab(args.config.as_deref()).and_then(|lab| {
-        load_and_check(
+        let checked = load_and_check(
             &args.traj,
             &lab,
             args.rate,
             args.speed_scale,
             args.waypoint_rate,
             args.camera,
-        )
+        );
+        lab_used = lab;
+        checked
     });
     let checked = match checked {
         Ok(c) => c,
@@ -189,6 +287,9 @@ pub fn run(args: CheckArgs) -> u8 {
         }
     };
     let report = &checked.report;
+    let from = args.from.unwrap_or(lab_used.arm.rest_q);
+    let moves = plan_moves(&checked.table, &lab_used, &from);
+    let (moves_text, moves_ok) = describe_moves(&moves, args.from.as_ref());
     let rate_refused_by_run = args.rate > XARM_MAX_SERVO_RATE_HZ;
     if rate_refused_by_run && !args.json {
         crate::errln!(
@@ -206,12 +307,17 @@ pub fn run(args: CheckArgs) -> u8 {
             obj.insert("lead_in_s".into(), (report.lead_in_ticks as f64 / report.rate_hz).into());
             obj.insert("lead_out_s".into(), (report.lead_out_ticks as f64 / report.rate_hz).into());
             obj.insert("speed_scale_to_pass".into(), checked.speed_scale_to_pass.into());
+            obj.insert("moves".into(), moves_json(&moves));
+            obj.insert("moves_safe".into(), moves_ok.into());
+            obj.insert("approach_from".into(), from.to_vec().into());
         }
         crate::outln!("{v}");
     } else {
-        crate::out!("{}", human(&args.traj, &checked));
+        crate::out!("{}", human(&args.traj, &checked, moves_ok));
+        crate::out!("  moves between rests (planned around the obstacles, checked every tick):\n");
+        crate::out!("{moves_text}");
     }
-    if report.is_safe() {
+    if report.is_safe() && moves_ok {
         exit::OK
     } else {
         exit::PREFLIGHT_REFUSED
@@ -219,11 +325,13 @@ pub fn run(args: CheckArgs) -> u8 {
 }
 
 /// The short human report.
-fn human(path: &Path, c: &Checked) -> String {
+fn human(path: &Path, c: &Checked, moves_ok: bool) -> String {
     let r = &c.report;
     let mut s = String::new();
-    let verdict = if r.is_safe() {
+    let verdict = if r.is_safe() && moves_ok {
         "SAFE".to_string()
+    } else if r.is_safe() {
+        "UNSAFE (the approach or the retreat has no safe path)".to_string()
     } else {
         format!("UNSAFE ({} violation(s))", r.violations.len())
     };

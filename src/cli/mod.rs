@@ -8,6 +8,7 @@ pub mod check;
 pub mod device_flags;
 pub mod eval;
 pub mod export;
+pub mod park;
 pub mod plan;
 pub mod probe;
 pub mod report;

@@ -1,9 +1,13 @@
 //! `hitl plan`: plan an orbital trajectory (ROE -> HCW -> lab frame -> IK), preflight it, and
 //! write it as NPZ. See docs/planner.md.
 //!
+//! Before writing, the moves a run makes around the plan are planned and checked as `hitl check`
+//! does: the approach from the lab's rest pose (`[arm] rest_q`) and the retreat back to it.
+//!
 //! Exit codes: 0 written; 2 bad flags or configuration, or the scaled orbit does not fit the
 //! arm's reachable, collision-free volume (the message names the feasible arcs and the `--arc`
-//! that plans the longest); 3 the planned motion failed preflight (nothing written).
+//! that plans the longest); 3 the planned motion failed preflight, or the approach or retreat has
+//! no safe path (nothing written).
 
 use crate::exit;
 use hitl_trajectories::lab::LabConfig;
@@ -240,6 +244,14 @@ pub fn run(args: PlanArgs) -> u8 {
         }
         return exit::PREFLIGHT_REFUSED;
     }
+    let moves = super::check::plan_moves(&table, &lab, &lab.arm.rest_q);
+    let (moves_text, moves_ok) = super::check::describe_moves(&moves, None);
+    if !moves_ok {
+        crate::errln!(
+            "hitl plan: the plan cannot be reached from the rest pose, nothing written:\n{moves_text}"
+        );
+        return exit::PREFLIGHT_REFUSED;
+    }
     let out = args
         .out
         .clone()
@@ -249,10 +261,15 @@ pub fn run(args: PlanArgs) -> u8 {
         return exit::BAD_INPUT;
     }
     if args.json {
-        let v = serde_json::json!({ "out": out.display().to_string(), "summary": plan.summary });
+        let v = serde_json::json!({
+            "out": out.display().to_string(),
+            "summary": plan.summary,
+            "moves": super::check::moves_json(&moves),
+        });
         crate::outln!("{v}");
     } else {
         print_summary(&plan.summary, &out);
+        crate::out!("{moves_text}");
     }
     exit::OK
 }

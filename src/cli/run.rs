@@ -80,6 +80,10 @@ pub struct RunArgs {
     /// Spin for the last N microseconds before each deadline (tighter wake-ups, one busy core).
     #[arg(long, default_value_t = 0, value_name = "US")]
     pub spin_us: u64,
+    /// Leave the arm where the trajectory ends. By default a completed run goes back to the lab's
+    /// rest pose (`[arm] rest_q`) along a planned, checked path, so the next run starts from rest.
+    #[arg(long)]
+    pub no_retreat: bool,
     /// Print plain progress lines even on a terminal.
     #[arg(long)]
     pub plain: bool,
@@ -92,10 +96,6 @@ pub struct RunArgs {
     pub live: Option<SocketAddr>,
     /// Allow a non-loopback --live address (the live view then answers anyone on that network).
     #[arg(long)]
-    /// Leave the arm where the trajectory ends. By default a completed run goes back to the lab's
-    /// rest pose (`[arm] rest_q`) along a planned, checked path, so the next run starts from rest.
-    #[arg(long)]
-    pub no_retreat: bool,
     pub allow_remote: bool,
 }
 
@@ -193,6 +193,8 @@ pub fn run(args: RunArgs, record: bool) -> u8 {
             cpu: args.cpu,
             spin: Duration::from_micros(args.spin_us),
         },
+        retreat: !args.no_retreat,
+        park: false,
         plain_progress: args.plain || !std::io::stderr().is_terminal(),
         live: args.live.map(LiveConfig::new),
     };
@@ -207,4 +209,3 @@ pub fn run(args: RunArgs, record: bool) -> u8 {
         }
     }
 }
-        retreat: !args.no_retreat,

@@ -26,8 +26,8 @@ use crate::capture::sink::{IntakeQueues, RunTelemetry};
 use crate::capture::truth::LabFrames;
 use crate::control::interlocks::{Interlocks, Thresholds};
 use crate::control::motion::MoveLimits;
-use crate::control::setpoint::Setpoint;
 use crate::control::planned_move::PlannedMove;
+use crate::control::setpoint::Setpoint;
 use crate::control::stop::StopPlanner;
 use crate::control::stop_supervisor::StopConfirmation;
 use crate::control::telemetry::LoopStatus;
@@ -121,13 +121,16 @@ pub struct RunRequest {
     /// How the simulated camera's depth is degraded (`--depth-model`).
     pub depth_model: crate::devices::SimDepthModel,
     pub rt: RtOptions,
+    /// After a completed run, go back to the lab's rest pose (`[arm] rest_q`) along a planned,
+    /// checked path (`--no-retreat`: false, the arm stays where the trajectory ends).
+    pub retreat: bool,
+    /// `hitl park`: no trajectory (`trajectory` is not read); the only motion is the retreat from
+    /// wherever the arm stands to the rest pose.
+    pub park: bool,
     pub plain_progress: bool,
     /// Stream the run to Foxglove (`--live`; needs `record`: the recorder feeds it).
     pub live: Option<hitl_record::LiveConfig>,
 }
-    /// After a completed run, go back to the lab's rest pose (`[arm] rest_q`) along a planned,
-    /// checked path (`--no-retreat`: false, the arm stays where the trajectory ends).
-    pub retreat: bool,
 
 /// A run that could not start (nothing moved), or a device that failed before the loop.
 #[derive(Debug, thiserror::Error)]
@@ -166,12 +169,12 @@ pub struct RunReport {
     pub exit_code: u8,
     pub approach_ticks: usize,
     pub playback_ticks: usize,
+    /// Ticks of the retreat to the rest pose (0: none planned).
+    pub retreat_ticks: usize,
     pub captures: u64,
     pub max_late_ns: u64,
     pub overruns: u64,
     pub rt: rt::RtReport,
-    /// Ticks of the retreat to the rest pose (0: none planned).
-    pub retreat_ticks: usize,
     /// Where the stub's arm ended (stub runs only).
     pub stub_final_q: Option<Joints>,
     pub recording: Option<PathBuf>,
@@ -191,6 +194,19 @@ pub struct RunReport {
 impl RunReport {
     pub fn summary(&self) -> String {
         let how = match self.outcome {
+            Outcome::Completed { ticks, at_rest, .. }
+                if self.approach_ticks + self.playback_ticks == 0 =>
+            {
+                format!(
+                    "parked: {ticks} ticks ({} retreat), {}",
+                    self.retreat_ticks,
+                    match at_rest {
+                        Some(true) => "back at the rest pose",
+                        Some(false) => "the settle at the rest pose timed out",
+                        None => "already at the rest pose",
+                    }
+                )
+            }
             Outcome::Completed { ticks, settled, at_rest } => format!(
                 "completed: {ticks} ticks ({} approach, {} playback{}), {}{}",
                 self.approach_ticks,
@@ -263,8 +279,9 @@ pub fn run(req: RunRequest) -> Result<RunReport, RunError> {
     let operator_stop = Arc::new(AtomicBool::new(false));
     install_ctrlc(&operator_stop);
 
-    // 1. Before anything is opened: the trajectory, the target, the estimator choice.
-    let (traj, table) = prepare(&req)?;
+    // 1. Before anything is opened: the trajectory (parking: the rest pose alone), the target, the
+    // estimator choice.
+    let (traj, table) = if req.park { park_target(&req)? } else { prepare(&req)? };
     let scene = target_scene(&req, &traj)?;
     check_perception_choice(&req)?;
     let clock = MonotonicClock::new();
@@ -285,7 +302,11 @@ pub fn run(req: RunRequest) -> Result<RunReport, RunError> {
     // 6. The program: the approach from where the arm stands, the trajectory, the retreat to rest;
     // each planned move is recorded with the run.
     let retreat_to = req.retreat.then_some(link.lab.arm.rest_q);
-    let (program, moves) = build_program(&link.first.q, &table, &link.lab, retreat_to.as_ref())?;
+    let (program, moves) = if req.park {
+        build_park_program(&link.first.q, &table, &link.lab)?
+    } else {
+        build_program(&link.first.q, &table, &link.lab, retreat_to.as_ref())?
+    };
     for m in &moves {
         crate::errln!("{}", m.describe());
         if let Some(t) = &capture.record {
@@ -671,6 +692,37 @@ fn build_program(
     Ok((program, [Some(approach), retreat].into_iter().flatten().collect()))
 }
 
+/// `hitl park`'s stand-in for a trajectory: the rest pose held for one tick, so the steps of a run
+/// (the stub, the arm's identity check, the recording) have one to name.
+fn park_target(req: &RunRequest) -> Result<(Trajectory, SetpointTable), RunError> {
+    prepare::check_rate(req)?;
+    let rest = req.lab.arm.rest_q;
+    let traj = Trajectory {
+        qpos: vec![rest, rest],
+        t: vec![0.0, 1.0 / req.rate_hz],
+        ..Default::default()
+    };
+    let table = SetpointTable::build(&traj, req.rate_hz, 1.0)
+        .map_err(|e| RunError::BadInput(e.to_string()))?;
+    Ok((traj, table))
+}
+
+/// `hitl park`'s program: nothing but the retreat from `start` to the rest pose.
+fn build_park_program(
+    start: &Joints,
+    table: &SetpointTable,
+    lab: &LabConfig,
+) -> Result<(Program, Vec<PlannedMove>), RunError> {
+    let retreat = plan_move_between("retreat", start, &lab.arm.rest_q, lab, table.rate_hz)?;
+    let program = Program {
+        settle_tolerance_rad: 0.002,
+        settle_max_ticks: (2.0 * table.rate_hz) as u64,
+        retreat: retreat.setpoints.clone(),
+        ..Program::default()
+    };
+    Ok((program, vec![retreat]))
+}
+
 /// What the loop left.
 struct Played {
     outcome: Outcome,
@@ -786,6 +838,7 @@ fn report(
         exit_code,
         approach_ticks: program.approach.len(),
         playback_ticks: program.playback.len(),
+        retreat_ticks: program.retreat.len(),
         captures: played.captures,
         max_late_ns: played.status.max_late_ns.load(Ordering::Relaxed),
         overruns: played.status.overruns.load(Ordering::Relaxed),
@@ -800,4 +853,3 @@ fn report(
         live: closed.live,
     }
 }
-        retreat_ticks: program.retreat.len(),
