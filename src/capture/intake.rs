@@ -4,6 +4,7 @@
 //! It also measures the sync error: exposure time minus the tick's trigger time.
 
 use super::history::StateHistory;
+use super::mask::{MaskDrawer, MaskSource, MaskStats};
 use super::sink::IntakeQueues;
 use super::truth::LabFrames;
 use crate::control::telemetry::CaptureOut;
@@ -32,12 +33,35 @@ pub struct IntakeStats {
     /// Exposure minus trigger, nanoseconds: mean and largest magnitude.
     pub sync_error_mean_ns: f64,
     pub sync_error_max_ns: u64,
+    /// Where the masks came from, and (`rendered`) how drawing them went.
+    pub mask: MaskStats,
 }
 
 /// Where frames go after the intake.
 pub struct IntakeOutputs {
     pub record: Option<Telemetry>,
     pub perception: Option<WorkerHandle>,
+}
+
+/// The mask every frame gets on its way to the recorder and perception.
+pub enum IntakeMask {
+    /// The camera's own (the simulated camera's), as delivered.
+    Camera,
+    /// Drawn from the controller's lab at the exposure (the camera's own, if any, is only
+    /// compared with).
+    Rendered(Box<MaskDrawer>),
+    /// None, whatever the camera delivered.
+    Dropped,
+}
+
+impl IntakeMask {
+    fn source(&self) -> MaskSource {
+        match self {
+            Self::Camera => MaskSource::Sim,
+            Self::Rendered(_) => MaskSource::Rendered,
+            Self::Dropped => MaskSource::None,
+        }
+    }
 }
 
 /// The running intake; `finish` drains what is left and returns the statistics.
@@ -51,12 +75,13 @@ impl Intake {
         queues: Arc<IntakeQueues>,
         frames: LabFrames,
         out: IntakeOutputs,
+        mask: IntakeMask,
     ) -> std::io::Result<Self> {
         let stop = Arc::new(AtomicBool::new(false));
         let stop_flag = Arc::clone(&stop);
         let thread = std::thread::Builder::new()
             .name("hitl-capture-intake".into())
-            .spawn(move || Worker::new(queues, frames, out).run(&stop_flag))?;
+            .spawn(move || Worker::new(queues, frames, out, mask).run(&stop_flag))?;
         Ok(Self { stop, thread: Some(thread) })
     }
 
@@ -80,6 +105,7 @@ struct Worker {
     queues: Arc<IntakeQueues>,
     frames: LabFrames,
     out: IntakeOutputs,
+    mask: IntakeMask,
     history: StateHistory,
     captures: VecDeque<CaptureOut>,
     stats: IntakeStats,
@@ -88,14 +114,24 @@ struct Worker {
 }
 
 impl Worker {
-    fn new(queues: Arc<IntakeQueues>, frames: LabFrames, out: IntakeOutputs) -> Self {
+    fn new(
+        queues: Arc<IntakeQueues>,
+        frames: LabFrames,
+        out: IntakeOutputs,
+        mask: IntakeMask,
+    ) -> Self {
+        let stats = IntakeStats {
+            mask: MaskStats { source: Some(mask.source()), ..MaskStats::default() },
+            ..IntakeStats::default()
+        };
         Self {
             queues,
             frames,
             out,
+            mask,
             history: StateHistory::new(4096),
             captures: VecDeque::new(),
-            stats: IntakeStats::default(),
+            stats,
             sync_sum_ns: 0.0,
             lost_seen: 0,
         }
@@ -113,16 +149,15 @@ impl Worker {
             }
         }
         self.stats.captures_missed = self.queues.captures_missed.load(Ordering::Relaxed);
+        if let IntakeMask::Rendered(d) = &self.mask {
+            self.stats.mask = d.stats().clone();
+        }
         self.stats
     }
 
     /// One pass over the queues; whether anything was there.
     fn drain(&mut self) -> bool {
-        let mut worked = false;
-        while let Some(state) = self.queues.states.pop() {
-            self.history.push(state);
-            worked = true;
-        }
+        let mut worked = self.take_states();
         while let Some(capture) = self.queues.captures.pop() {
             if self.captures.len() == 1024 {
                 self.captures.pop_front();
@@ -137,6 +172,7 @@ impl Worker {
         self.lost_seen = lost;
         while let Some(frame) = self.queues.frames.pop() {
             // The capture record follows the frame's tick; give a late one a moment.
+            self.take_states();
             self.handle(frame);
             worked = true;
         }
@@ -146,6 +182,19 @@ impl Worker {
             worked = true;
         }
         worked
+    }
+
+    /// Moves the arm states the tick queued into the history; whether there were any. Called
+    /// between frames and while a frame waits for the recorder: the queue holds 16 s of states
+    /// at 250 Hz, and an intake held up longer by a slow recorder would otherwise lose the
+    /// states around the exposures still waiting, and match those frames to the wrong pose.
+    fn take_states(&mut self) -> bool {
+        let mut any = false;
+        while let Some(state) = self.queues.states.pop() {
+            self.history.push(state);
+            any = true;
+        }
+        any
     }
 
     fn not_recorded(&mut self, t_ns: u64, tick: u64, why: &str) {
@@ -159,7 +208,7 @@ impl Worker {
         }
     }
 
-    fn handle(&mut self, frame: RgbdFrame) {
+    fn handle(&mut self, mut frame: RgbdFrame) {
         self.stats.frames += 1;
         let request = frame.request;
         let capture = self.captures.iter().find(|c| c.tick == request.tick).copied();
@@ -174,6 +223,17 @@ impl Worker {
             .or(capture.map(|c| c.commanded.q))
             .unwrap_or([0.0; 7]);
         let gt = self.frames.target_in_camera(&q);
+        // The frame's mask as the run chose: the camera's, drawn at this pose, or none. An empty
+        // drawn mask (target out of view) goes on as it is: the estimator finds no target and
+        // the frame is scored as failed.
+        match &mut self.mask {
+            IntakeMask::Camera => {}
+            IntakeMask::Rendered(drawer) => {
+                let truth = frame.mask.take();
+                frame.mask = Some(drawer.draw(&gt, &frame.intrinsics, truth.as_deref()));
+            }
+            IntakeMask::Dropped => frame.mask = None,
+        }
 
         if let Some(worker) = &self.out.perception {
             worker.push(PerceptionFrame {
@@ -193,6 +253,9 @@ impl Worker {
             let deadline = std::time::Instant::now() + Duration::from_secs(2);
             while !record.frame_queue_has_room() && std::time::Instant::now() < deadline {
                 std::thread::sleep(Duration::from_millis(5));
+                while let Some(state) = self.queues.states.pop() {
+                    self.history.push(state);
+                }
             }
             if record.push_frame(rec) {
                 self.stats.recorded += 1;

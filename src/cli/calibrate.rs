@@ -383,6 +383,12 @@ fn play_views(
         trigger: args.devices.run_trigger(),
         perception: BackendSpec::None,
         reregister: ReregisterPolicy::default(),
+        // The board is found in colour: no target mask is drawn (the simulator's is kept).
+        mask: match args.devices.run_camera() {
+            crate::devices::CameraSpec::Sim => crate::capture::mask::MaskSource::Sim,
+            _ => crate::capture::mask::MaskSource::None,
+        },
+        mask_margin_px: 0,
         camera_preset: args.sim_camera.camera_preset.clone(),
         camera_size: Some(size),
         target_model: "asymmetric".into(),

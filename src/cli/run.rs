@@ -4,9 +4,11 @@
 //! xArm moves: the operator must confirm the enclosure is clear (or pass `--yes`), and the run
 //! refuses when it cannot ask.
 
+use crate::capture::mask::{MaskSource, DEFAULT_MARGIN_PX};
 use crate::cli::device_flags::{DeviceFlags, LabFlags, Refusal, SimCameraFlags};
 use crate::cli::reregister::ReregisterArgs;
 use crate::control::session::{self, ArmTarget, RunRequest, StubFault};
+use crate::devices::CameraSpec;
 use crate::exit;
 use crate::rt::RtOptions;
 use hitl_perception::BackendSpec;
@@ -51,6 +53,16 @@ pub struct RunArgs {
     pub perception: BackendSpec,
     #[command(flatten)]
     pub reregister: ReregisterArgs,
+    /// Where each capture's target mask comes from: sim (the simulated camera's own; the default
+    /// with --camera sim), rendered (drawn by the controller from its lab configuration, the
+    /// target model and the arm's reported joints at the exposure, with the camera's intrinsics;
+    /// the default with an Orbbec camera, which has no mask), or none (the estimator gets no
+    /// mask). Recorded on /camera/mask and named in the run's metadata (docs/perception.md).
+    #[arg(long, value_name = "sim|rendered|none")]
+    pub mask: Option<MaskSource>,
+    /// Pixels the rendered mask is grown by, to cover calibration and timing error.
+    #[arg(long, default_value_t = DEFAULT_MARGIN_PX, value_name = "N")]
+    pub mask_margin_px: u32,
     /// Target model: asymmetric, one-plane, two-planes (built in) or an OBJ/STL file.
     #[arg(long, default_value = "asymmetric", value_name = "NAME|FILE")]
     pub target_model: String,
@@ -168,6 +180,12 @@ pub fn run(args: RunArgs, record: bool) -> u8 {
         (None, false) if args.live.is_some() => Some(default_record_path()),
         (None, false) => None,
     };
+    let camera = args.devices.run_camera();
+    let mask = args.mask.unwrap_or(match camera {
+        CameraSpec::Sim => MaskSource::Sim,
+        CameraSpec::Orbbec(_) => MaskSource::Rendered,
+        CameraSpec::None => MaskSource::None,
+    });
     let request = RunRequest {
         trajectory: args.trajectory,
         waypoint_rate_hz: args.waypoint_rate,
@@ -177,11 +195,13 @@ pub fn run(args: RunArgs, record: bool) -> u8 {
         target,
         record,
         record_compression: args.record_compression,
-        camera: args.devices.run_camera(),
+        camera,
         light: args.devices.run_light(),
         trigger: args.devices.run_trigger(),
         perception: args.perception,
         reregister,
+        mask,
+        mask_margin_px: args.mask_margin_px,
         camera_preset: args.sim_camera.camera_preset,
         camera_size: args.sim_camera.camera_size,
         target_model: args.target_model,

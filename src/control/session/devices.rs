@@ -67,6 +67,8 @@ pub(super) fn start_recorder(
             "perception": perception_name(&req.perception),
             "record_compression": req.record_compression.to_string(),
             "reregister": req.reregister,
+            "mask": req.mask.to_string(),
+            "mask_margin_px": req.mask_margin_px,
             "target_model": req.target_model,
             "arm": match &req.target {
                 ArmTarget::Stub { faults } => format!(
@@ -89,6 +91,8 @@ pub(super) fn start_recorder(
                 hitl_perception::reregister::METADATA_KEY.to_string(),
                 serde_json::json!(req.reregister).to_string(),
             ),
+            ("mask_source".to_string(), req.mask.to_string()),
+            ("mask_margin_px".to_string(), req.mask_margin_px.to_string()),
         ]
         .into(),
         sun_phase: traj.sun_phase_deg.as_ref().map(|deg| SunPhaseTrack {

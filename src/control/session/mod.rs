@@ -21,7 +21,8 @@ mod devices;
 mod operator;
 mod prepare;
 
-use crate::capture::intake::{Intake, IntakeOutputs, IntakeStats};
+use crate::capture::intake::{Intake, IntakeMask, IntakeOutputs, IntakeStats};
+use crate::capture::mask::{MaskDrawer, MaskSource};
 use crate::capture::sink::{IntakeQueues, RunTelemetry};
 use crate::capture::truth::LabFrames;
 use crate::control::interlocks::{Interlocks, Thresholds};
@@ -110,6 +111,9 @@ pub struct RunRequest {
     pub perception: BackendSpec,
     /// When the perception backend re-registers beyond its first frame and a lost track.
     pub reregister: ReregisterPolicy,
+    /// Where each capture's target mask comes from (`--mask`), and the rendered mask's margin.
+    pub mask: MaskSource,
+    pub mask_margin_px: u32,
     /// Simulated camera intrinsics preset (nfov, wfov, orbbec) and size.
     pub camera_preset: String,
     pub camera_size: Option<(u32, u32)>,
@@ -239,6 +243,7 @@ impl RunReport {
             self.rt.summary()
         );
         if self.intake.frames > 0 {
+            s.push_str(&format!("\n{}", self.intake.mask.describe()));
             s.push_str(&format!(
                 "\nframes {} (recorded {}, not recorded {}, camera busy {}), sync error mean {:.2} ms max {:.2} ms, pose estimates {}",
                 self.intake.frames,
@@ -346,8 +351,16 @@ pub fn run(req: RunRequest) -> Result<RunReport, RunError> {
     Ok(report)
 }
 
-/// `--reregister-*` only make sense with a pose estimator.
+/// `--reregister-*` only make sense with a pose estimator; the simulator's mask only with the
+/// simulated camera.
 fn check_perception_choice(req: &RunRequest) -> Result<(), RunError> {
+    if req.mask == MaskSource::Sim && req.camera != CameraSpec::Sim {
+        return Err(RunError::BadInput(format!(
+            "--mask sim needs --camera sim (only the simulated camera has a mask of its own); \
+             with --camera {} use --mask rendered (drawn from the lab configuration) or none",
+            req.camera
+        )));
+    }
     if req.perception == BackendSpec::None && req.reregister != ReregisterPolicy::default() {
         return Err(RunError::BadInput(
             "--reregister-every and --reregister-residual-m need a pose estimator \
@@ -538,11 +551,26 @@ impl CapturePath {
                 }
             }
         };
+        let mask = match req.mask {
+            MaskSource::Sim => IntakeMask::Camera,
+            MaskSource::None => IntakeMask::Dropped,
+            MaskSource::Rendered => {
+                let mesh = scene
+                    .model
+                    .lab_mesh(scene.scale)
+                    .map_err(|e| RunError::BadInput(format!("--mask rendered: {e}")))?;
+                let tripod = MaskDrawer::tripod_visible(req.camera == CameraSpec::Sim, &req.lab);
+                let drawer = MaskDrawer::new(&mesh, &req.lab, tripod, req.mask_margin_px)
+                    .map_err(RunError::BadInput)?;
+                IntakeMask::Rendered(Box::new(drawer))
+            }
+        };
         let queues = Arc::new(IntakeQueues::new());
         let intake = Intake::spawn(
             Arc::clone(&queues),
             LabFrames::new(&req.lab),
             IntakeOutputs { record: record.clone(), perception: perception.clone() },
+            mask,
         )
         .map_err(|e| RunError::Device(format!("capture intake thread: {e}")))?;
         Ok(Self { recorder, record, perception, estimates, intake, queues, live })
