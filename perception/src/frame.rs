@@ -61,6 +61,18 @@ impl PerceptionFrame {
         Ok(())
     }
 
+    /// True if pixel `idx` lies in the target's silhouette: in the mask if there is one (with or
+    /// without depth: a stereo camera has none at edges and in shadows), else any valid depth.
+    pub fn in_silhouette(&self, idx: usize) -> bool {
+        match &self.mask {
+            Some(m) => m[idx] != 0,
+            None => {
+                let d = self.depth_m[idx];
+                d.is_finite() && d > 0.0
+            }
+        }
+    }
+
     /// True if pixel `idx` belongs to the target (by mask if there is one, else any valid depth).
     pub fn is_target(&self, idx: usize) -> bool {
         let d = self.depth_m[idx];

@@ -73,8 +73,17 @@ pub fn align(
                 n.y,
                 n.z,
             );
-            a += j * j.transpose();
-            b += j * r0;
+            // Tukey's biweight on the point-to-plane residual, zero beyond the trimming bound:
+            // a point half-way to the bound counts half as much, so stray points (the stand,
+            // what lies behind the outline in a mask with a margin, a stereo camera's outliers)
+            // pull less than the noise-sized ones.
+            let u = r0 / bound;
+            if u.abs() >= 1.0 {
+                continue;
+            }
+            let wt = (1.0 - u * u).powi(2);
+            a += j * j.transpose() * wt;
+            b += j * r0 * wt;
             used += 1;
         }
         if used < 6 {

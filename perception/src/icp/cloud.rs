@@ -3,21 +3,85 @@
 use crate::PerceptionFrame;
 use nalgebra::Vector3;
 
-/// Camera-frame points of the target pixels (mask and valid depth), at most `max_points`, taken
-/// at a regular stride over the target pixels so the sample is deterministic and spread out.
-pub fn scene_points(frame: &PerceptionFrame, max_points: usize) -> Vec<Vector3<f64>> {
+/// The target's pixels of a frame, as the tracker uses them.
+#[derive(Debug, Clone, Default)]
+pub struct Scene {
+    /// Camera-frame points, at most the number asked, at a regular stride over the target
+    /// pixels so the sample is deterministic and spread out.
+    pub points: Vec<Vector3<f64>>,
+    /// The depth noise's standard deviation at the target, metres, estimated from the frame
+    /// itself (0 when it cannot be: too few neighbouring target pixels).
+    pub noise_m: f64,
+    /// Depth beyond which a mask pixel is not the target's (behind its outline): infinite
+    /// without a mask.
+    pub far_m: f64,
+}
+
+/// Camera-frame points of the target pixels (mask and valid depth), at most `max_points`.
+///
+/// With a mask, pixels whose depth lies more than `depth_window` (the target's size) behind
+/// the nearest part of the target are dropped: a mask that is not the target's exact silhouette
+/// (drawn from a calibrated lab with a margin, [`crate::silhouette`]) also covers what lies
+/// behind the target's outline (curtains, the stand), and a stereo camera's depth there is not
+/// the target's. The nearest part is the 10th percentile of the mask's depths (robust to a few
+/// stray near pixels).
+pub fn scene(frame: &PerceptionFrame, max_points: usize, depth_window: f64) -> Scene {
     let k = &frame.intrinsics;
     let w = k.width as usize;
-    let idx: Vec<usize> = (0..frame.depth_m.len()).filter(|&i| frame.is_target(i)).collect();
+    let mut idx: Vec<usize> = (0..frame.depth_m.len()).filter(|&i| frame.is_target(i)).collect();
+    let mut far_m = f64::INFINITY;
+    if frame.mask.is_some() && depth_window > 0.0 && idx.len() > 10 {
+        let mut z: Vec<f32> = idx.iter().map(|&i| frame.depth_m[i]).collect();
+        let p10 = idx.len() / 10;
+        let (_, near, _) = z.select_nth_unstable_by(p10, f32::total_cmp);
+        let far = f64::from(*near) + depth_window;
+        idx.retain(|&i| f64::from(frame.depth_m[i]) <= far);
+        far_m = far;
+    }
     let stride = idx.len().div_ceil(max_points.max(1)).max(1);
-    idx.iter()
+    let points = idx
+        .iter()
         .step_by(stride)
         .map(|&i| {
             let z = frame.depth_m[i] as f64;
             let (u, v) = ((i % w) as f64, (i / w) as f64);
             Vector3::new((u - k.cx) / k.fx * z, (v - k.cy) / k.fy * z, z)
         })
-        .collect()
+        .collect();
+    Scene { points, noise_m: depth_noise(frame, &idx, stride), far_m }
+}
+
+/// Camera-frame points of the target pixels (see [`scene`], no depth window).
+pub fn scene_points(frame: &PerceptionFrame, max_points: usize) -> Vec<Vector3<f64>> {
+    scene(frame, max_points, 0.0).points
+}
+
+/// The depth noise at the target pixels `idx` (every `stride`-th looked at), metres: a robust
+/// standard deviation of the second difference of depth along rows, over pixels whose two
+/// row neighbours are target pixels too. On a surface the second difference is (nearly) zero; a
+/// sensor's independent per-pixel error e gives e(u-1) - 2 e(u) + e(u+1), whose standard
+/// deviation is sqrt(6) times the error's. Median absolute value / 0.6745 is the robust sigma
+/// (edges and creases are its outliers). A stereo camera's error grows as z^2: this is its value
+/// at the target's range, which is what the tracker's tolerances need.
+fn depth_noise(frame: &PerceptionFrame, idx: &[usize], stride: usize) -> f64 {
+    let w = frame.intrinsics.width as usize;
+    let mut d2: Vec<f64> = idx
+        .iter()
+        .step_by(stride.max(1).div_ceil(2))
+        .filter(|&&i| {
+            i % w > 0 && i % w + 1 < w && frame.is_target(i - 1) && frame.is_target(i + 1)
+        })
+        .map(|&i| {
+            let z = |j: usize| f64::from(frame.depth_m[j]);
+            (z(i - 1) - 2.0 * z(i) + z(i + 1)).abs()
+        })
+        .collect();
+    if d2.len() < 20 {
+        return 0.0;
+    }
+    let mid = d2.len() / 2;
+    let (_, med, _) = d2.select_nth_unstable_by(mid, f64::total_cmp);
+    *med / 0.6745 / 6f64.sqrt()
 }
 
 /// Every `step`-th point of a cloud (at least `min` points if the cloud has them).

@@ -72,6 +72,11 @@ pub struct IcpConfig {
     pub max_violation: f64,
     /// Fewer target points than this: no estimate.
     pub min_scene_points: usize,
+    /// The inlier tolerance is at least this many standard deviations of the frame's depth
+    /// noise (estimated from the frame: [`cloud::scene`]): a stereo camera's error at the
+    /// target's range can exceed the model-size tolerance, and then a correct pose is not an
+    /// outlier of its own data.
+    pub noise_sigmas: f64,
 }
 
 impl Default for IcpConfig {
@@ -93,6 +98,7 @@ impl Default for IcpConfig {
             min_silhouette: 0.8,
             max_violation: 0.05,
             min_scene_points: 30,
+            noise_sigmas: 2.5,
         }
     }
 }
@@ -137,6 +143,10 @@ pub struct IcpTracker {
     last_good: Option<Pose>,
     velocity: Option<Pose>,
     missed: u32,
+    /// This frame's depth-noise tolerance (`noise_sigmas` x its estimated noise), metres.
+    noise_tol: f64,
+    /// This frame's depth beyond which mask pixels are background ([`cloud::Scene::far_m`]).
+    far_m: f64,
 }
 
 /// Frames a lost track's motion is carried on for; after that, registration has no prior.
@@ -175,6 +185,8 @@ impl IcpTracker {
             last_good: None,
             velocity: None,
             missed: 0,
+            noise_tol: 0.0,
+            far_m: f64::INFINITY,
         })
     }
 
@@ -183,7 +195,9 @@ impl IcpTracker {
     }
 
     fn tol(&self) -> f64 {
-        self.cfg.tol_spacing * self.model.spacing + self.cfg.tol_rel * self.model.diameter
+        let geometric =
+            self.cfg.tol_spacing * self.model.spacing + self.cfg.tol_rel * self.model.diameter;
+        geometric.max(self.noise_tol)
     }
 
     fn full_check(
@@ -203,7 +217,8 @@ impl IcpTracker {
             self.tol(),
             true,
         );
-        let img = score::check(&self.model, frame, &fit.pose, self.tol(), behind_others);
+        let img =
+            score::check(&self.model, frame, &fit.pose, self.tol(), behind_others, self.far_m);
         Scored { fit, silhouette: img.silhouette, violation: img.violation }
     }
 
@@ -236,8 +251,15 @@ impl IcpTracker {
         let tol = self.tol();
         let rank = |cloud: &[Vector3<f64>], init: &Pose, iters: usize, max_dist: f64| {
             let fit = align(&self.model, cloud, init, iters, max_dist, 2.0 * tol, false);
-            let img =
-                score::check_strided(&self.model, frame, &fit.pose, 2.0 * tol, 16, Hidden::Miss);
+            let img = score::check_strided(
+                &self.model,
+                frame,
+                &fit.pose,
+                2.0 * tol,
+                16,
+                Hidden::Miss,
+                self.far_m,
+            );
             (fit.inlier_frac * img.silhouette * (1.0 - img.violation), fit.pose)
         };
         let t0 = std::time::Instant::now();
@@ -340,7 +362,10 @@ impl PoseEstimator for IcpTracker {
 
     fn estimate(&mut self, frame: &PerceptionFrame) -> Result<Estimate, PerceptionError> {
         frame.validate()?;
-        let scene = cloud::scene_points(frame, self.cfg.scene_points);
+        let seen = cloud::scene(frame, self.cfg.scene_points, self.model.diameter);
+        self.noise_tol = self.cfg.noise_sigmas * seen.noise_m;
+        self.far_m = seen.far_m;
+        let scene = seen.points;
         if scene.len() < self.cfg.min_scene_points {
             return Ok(self.lose());
         }
@@ -384,12 +409,14 @@ impl PoseEstimator for IcpTracker {
         if debug() {
             if let Some(s) = &reg {
                 debug_line!(
-                    "icp register: inliers {:.3} rms {:.2e} silhouette {:.3} violation {:.3} scene {}",
+                    "icp register: inliers {:.3} rms {:.2e} silhouette {:.3} violation {:.3} scene {} tol {:.2e} far {:.3}",
                     s.fit.inlier_frac,
                     s.fit.rms,
                     s.silhouette,
                     s.violation,
-                    scene.len()
+                    scene.len(),
+                    self.tol(),
+                    self.far_m
                 );
             }
         }
@@ -415,6 +442,8 @@ impl ScalableEstimator for IcpTracker {
         for f in &mut self.fronts {
             *f *= factor;
         }
+        self.noise_tol *= factor;
+        self.far_m *= factor;
         let poses = [&mut self.prev, &mut self.last_good, &mut self.velocity];
         for p in poses.into_iter().flatten() {
             p.translation.vector *= factor;

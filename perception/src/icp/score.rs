@@ -41,11 +41,14 @@ pub fn check(
     t: &Pose,
     tol: f64,
     behind_others: Hidden,
+    far_m: f64,
 ) -> ImageCheck {
-    check_strided(model, frame, t, tol, 1, behind_others)
+    check_strided(model, frame, t, tol, 1, behind_others, far_m)
 }
 
-/// [`check`] on every `stride`-th model sample (for cheap hypothesis ranking).
+/// [`check`] on every `stride`-th model sample (for cheap hypothesis ranking). Depths beyond
+/// `far_m` inside the mask are what lies behind the target's outline (a mask with a margin): a
+/// surface there is no free-space evidence against the target in front of it.
 pub fn check_strided(
     model: &ModelCloud,
     frame: &PerceptionFrame,
@@ -53,6 +56,7 @@ pub fn check_strided(
     tol: f64,
     stride: usize,
     behind_others: Hidden,
+    far_m: f64,
 ) -> ImageCheck {
     let k = &frame.intrinsics;
     let (w, h) = (k.width as i64, k.height as i64);
@@ -81,16 +85,22 @@ pub fn check_strided(
         let mut near = false;
         let mut hidden = true;
         let mut nearest_surface = f64::INFINITY;
+        let mut depth_missing = false;
         for dv in -1..=1 {
             for du in -1..=1 {
                 let (uu, vv) = (u + du, v + dv);
                 if uu >= 0 && vv >= 0 && uu < w && vv < h {
                     let j = (vv * w + uu) as usize;
                     let d = frame.depth_m[j] as f64;
-                    if frame.is_target(j) {
+                    let has_depth = d.is_finite() && d > 0.0;
+                    if frame.in_silhouette(j) {
                         near = true;
-                        nearest_surface = nearest_surface.min(d);
-                    } else if !(d.is_finite() && d > 0.0 && d < q.z - tol) {
+                        if has_depth && d <= far_m {
+                            nearest_surface = nearest_surface.min(d);
+                        } else if !has_depth {
+                            depth_missing = true;
+                        }
+                    } else if !(has_depth && d < q.z - tol) {
                         hidden = false;
                     }
                 }
@@ -102,7 +112,10 @@ pub fn check_strided(
         in_image += 1;
         if near {
             hits += 1;
-            if q.z < nearest_surface - tol {
+            // Next to a silhouette pixel without depth (a stereo camera has none at depth edges
+            // and in the projector's shadow), the visible neighbour may be the farther surface
+            // beside an edge: no evidence of free space there.
+            if !depth_missing && q.z < nearest_surface - tol {
                 violations += 1;
             }
         }
