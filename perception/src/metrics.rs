@@ -11,7 +11,14 @@
 //! the identity). Failed frames are counted and left out of mean/median/std. The reference frame
 //! is the first frame with a usable estimate; frames before it are failures. Statistics use the
 //! population standard deviation (numpy's default, ddof = 0).
+//!
+//! Next to the paper's figures, [`evaluate_symmetric`] scores the same corrected estimates up to
+//! the target's declared symmetry ([`Symmetry`]): `e_r_sym = min over S of |log(R_corr^T R_gt
+//! R_S)|` and `e_t_sym` against that same twin `T_gt * S`. The paper's `e_t` and `e_r` are
+//! computed exactly as before; the symmetric ones are never above `e_r` (the identity is in every
+//! group) and equal the paper's when the target declares no symmetry.
 
+use crate::models::Symmetry;
 use crate::PerceptionError;
 use hitl_hal::pose::{self, Pose};
 use serde::Serialize;
@@ -33,6 +40,10 @@ pub struct FrameError {
     pub et_m: f64,
     /// Rotation error, degrees.
     pub er_deg: f64,
+    /// Translation error against the nearest symmetric twin of the ground truth, real metres.
+    pub et_sym_m: f64,
+    /// Rotation error up to the target's symmetry, degrees (<= `er_deg`).
+    pub er_sym_deg: f64,
 }
 
 /// Summary over a run.
@@ -51,6 +62,14 @@ pub struct Metrics {
     pub mean_er_deg: f64,
     pub median_er_deg: f64,
     pub std_er_deg: f64,
+    /// The symmetry the `_sym` figures are taken up to ([`Symmetry::spec`]).
+    pub symmetry: String,
+    pub mean_et_sym_m: f64,
+    pub median_et_sym_m: f64,
+    pub std_et_sym_m: f64,
+    pub mean_er_sym_deg: f64,
+    pub median_er_sym_deg: f64,
+    pub std_er_sym_deg: f64,
     /// Timestamp of the reference (calibration) frame, if any frame could be scored.
     pub reference_timestamp_ns: Option<u64>,
     #[serde(skip)]
@@ -69,7 +88,18 @@ pub fn frame_error(corr: &Pose, gt: &Pose, scale: f64) -> (f64, f64) {
 }
 
 /// Scores a run. `pairs` must be in capture order; `scale` = lab metres per real metre (> 0).
+/// The `_sym` figures equal the paper's (no symmetry declared).
 pub fn evaluate(pairs: &[PosePair], scale: f64) -> Result<Metrics, PerceptionError> {
+    evaluate_symmetric(pairs, scale, &Symmetry::none())
+}
+
+/// [`evaluate`], with the `_sym` figures taken up to `symmetry` (body frame, real metres: its
+/// point is scaled to the lab with `scale`).
+pub fn evaluate_symmetric(
+    pairs: &[PosePair],
+    scale: f64,
+    symmetry: &Symmetry,
+) -> Result<Metrics, PerceptionError> {
     if !(scale.is_finite() && scale > 0.0) {
         return Err(PerceptionError::BadInput(format!(
             "scale must be a positive number, got {scale}"
@@ -83,6 +113,7 @@ pub fn evaluate(pairs: &[PosePair], scale: f64) -> Result<Metrics, PerceptionErr
             )));
         }
     }
+    let lab_symmetry = symmetry.clone().transformed([0.0; 3], scale);
     let mut dt: Option<Pose> = None;
     let mut reference = None;
     let mut per_frame = Vec::with_capacity(pairs.len());
@@ -99,11 +130,21 @@ pub fn evaluate(pairs: &[PosePair], scale: f64) -> Result<Metrics, PerceptionErr
             reference = Some(p.timestamp_ns);
             est.inverse() * p.gt
         });
-        let (et_m, er_deg) = frame_error(&(est * offset), &p.gt, scale);
-        per_frame.push(FrameError { timestamp_ns: p.timestamp_ns, et_m, er_deg });
+        let corr = est * offset;
+        let (et_m, er_deg) = frame_error(&corr, &p.gt, scale);
+        let sym = lab_symmetry.error(&corr, &p.gt);
+        per_frame.push(FrameError {
+            timestamp_ns: p.timestamp_ns,
+            et_m,
+            er_deg,
+            et_sym_m: sym.et / scale,
+            er_sym_deg: sym.er_rad.to_degrees().min(er_deg),
+        });
     }
     let et: Vec<f64> = per_frame.iter().map(|f| f.et_m).collect();
     let er: Vec<f64> = per_frame.iter().map(|f| f.er_deg).collect();
+    let et_sym: Vec<f64> = per_frame.iter().map(|f| f.et_sym_m).collect();
+    let er_sym: Vec<f64> = per_frame.iter().map(|f| f.er_sym_deg).collect();
     Ok(Metrics {
         frames: pairs.len(),
         scored: per_frame.len(),
@@ -115,6 +156,13 @@ pub fn evaluate(pairs: &[PosePair], scale: f64) -> Result<Metrics, PerceptionErr
         mean_er_deg: mean(&er),
         median_er_deg: median(&er),
         std_er_deg: std(&er),
+        symmetry: symmetry.spec.clone(),
+        mean_et_sym_m: mean(&et_sym),
+        median_et_sym_m: median(&et_sym),
+        std_et_sym_m: std(&et_sym),
+        mean_er_sym_deg: mean(&er_sym),
+        median_er_sym_deg: median(&er_sym),
+        std_er_sym_deg: std(&er_sym),
         reference_timestamp_ns: reference,
         per_frame,
     })
@@ -173,6 +221,13 @@ impl Metrics {
             "mean_er_deg": f(self.mean_er_deg),
             "median_er_deg": f(self.median_er_deg),
             "std_er_deg": f(self.std_er_deg),
+            "symmetry": self.symmetry,
+            "mean_et_sym_m": f(self.mean_et_sym_m),
+            "median_et_sym_m": f(self.median_et_sym_m),
+            "std_et_sym_m": f(self.std_et_sym_m),
+            "mean_er_sym_deg": f(self.mean_er_sym_deg),
+            "median_er_sym_deg": f(self.median_er_sym_deg),
+            "std_er_sym_deg": f(self.std_er_sym_deg),
             "reference_timestamp_ns": self.reference_timestamp_ns,
         })
     }

@@ -137,6 +137,7 @@ fn outlines_lie_on_the_mask_boundary_and_an_offset_estimate_is_drawn_that_far_aw
     let model = |_: &BTreeMap<String, String>| Ok(square());
     let opts = ReportOptions {
         contact: ContactOptions { frames: 4, max_width: 480, model: Some(&model), zoom: None },
+        pose_metrics: None,
     };
     let r = write_report_with(&path, Some(&out), &opts).expect("report");
 
@@ -208,7 +209,7 @@ fn outlines_lie_on_the_mask_boundary_and_an_offset_estimate_is_drawn_that_far_aw
     assert!(r.files.iter().any(|f| f.ends_with("contact/003.png")));
 
     // A second report into the same folder with fewer frames leaves no stale PNG behind.
-    let opts = ReportOptions { contact: ContactOptions { frames: 2, ..opts.contact } };
+    let opts = ReportOptions { contact: ContactOptions { frames: 2, ..opts.contact }, ..opts };
     write_report_with(&path, Some(&out), &opts).expect("report again");
     let mut left: Vec<String> = std::fs::read_dir(out.join("contact"))
         .expect("dir")
@@ -228,8 +229,10 @@ fn a_large_frame_is_shrunk_and_its_outlines_follow() {
     record(&path, vec![(frame(0, 3_000_000_000, w, h, true), Some(est))]);
     let out = dir.path().join("report");
     let model = |_: &BTreeMap<String, String>| Ok(square());
-    let opts =
-        ReportOptions { contact: ContactOptions { model: Some(&model), ..Default::default() } };
+    let opts = ReportOptions {
+        contact: ContactOptions { model: Some(&model), ..Default::default() },
+        ..Default::default()
+    };
     let r = write_report_with(&path, Some(&out), &opts).expect("report");
     let f = &r.summary.contact_sheet.as_ref().expect("sheet").frames[0];
     let png = Png::read(&out.join(&f.file));

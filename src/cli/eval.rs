@@ -9,7 +9,8 @@ use crate::cli::reregister::ReregisterArgs;
 use crate::exit;
 use hitl_hal::Pose;
 use hitl_perception::estimator::BackendSpec;
-use hitl_perception::metrics::{evaluate, frame_error, PosePair};
+use hitl_perception::metrics::{evaluate_symmetric, frame_error, PosePair};
+use hitl_perception::models::Symmetry;
 use hitl_perception::replay::replay_frames;
 use hitl_perception::reregister::METADATA_KEY;
 use hitl_perception::{backend_from_spec, ReregisterPolicy, Reregistering, TargetModel};
@@ -33,6 +34,12 @@ pub struct EvalArgs {
     /// .obj/.stl file (default: the run's `target_model` metadata, else asymmetric).
     #[arg(long)]
     pub target: Option<String>,
+    /// The target's symmetry for the symmetry-aware figures (`*_sym_*`): none, one-plane,
+    /// two-planes:AXIS, N-fold:AXIS, revolution:AXIS, joined by + (docs/perception.md). Default:
+    /// the declared symmetry of the target (--target, else the run's `target_model`): a built-in's
+    /// own, an OBJ/STL's `FILE.symmetry` file, else none. The paper's e_t and e_r never change.
+    #[arg(long, value_name = "SPEC")]
+    pub target_symmetry: Option<String>,
     /// Lab metres per real metre (default: the run's `scale` metadata).
     #[arg(long)]
     pub scale: Option<f64>,
@@ -58,13 +65,16 @@ pub fn run(args: EvalArgs) -> u8 {
                 crate::outln!("{v}");
             } else {
                 if let Some(rows) = v.get("per_frame").and_then(|p| p.as_array()) {
-                    crate::outln!("frame  t [s]     e_t [m]   e_r [deg]  raw e_r [deg]");
+                    crate::outln!(
+                        "frame  t [s]     e_t [m]   e_r [deg]  raw e_r [deg]  e_r sym [deg]"
+                    );
                     for (i, r) in rows.iter().enumerate() {
                         let t = r.get("t_s").and_then(|x| x.as_f64()).unwrap_or(f64::NAN);
                         let raw = r.get("raw_er_deg").and_then(|x| x.as_f64()).unwrap_or(f64::NAN);
+                        let sym = r.get("er_sym_deg").and_then(|x| x.as_f64()).unwrap_or(f64::NAN);
                         match (r.get("et_m").and_then(|x| x.as_f64()), r.get("er_deg")) {
                             (Some(et), Some(er)) => crate::outln!(
-                                "{i:5}  {t:8.3}  {et:8.4}  {:9.3}  {raw:13.3}",
+                                "{i:5}  {t:8.3}  {et:8.4}  {:9.3}  {raw:13.3}  {sym:13.3}",
                                 er.as_f64().unwrap_or(f64::NAN)
                             ),
                             _ => crate::outln!("{i:5}  {t:8.3}  failed"),
@@ -105,6 +115,19 @@ pub fn run(args: EvalArgs) -> u8 {
                     g("median_er_deg"),
                     g("std_er_deg")
                 );
+                crate::outln!(
+                    "up to the target's symmetry ({}, from {}):\n\
+                     e_t real m: mean {} median {} std {}\n\
+                     e_r deg:    mean {} median {} std {}",
+                    g("symmetry").as_str().unwrap_or("none"),
+                    g("symmetry_source").as_str().unwrap_or("?"),
+                    g("mean_et_sym_m"),
+                    g("median_et_sym_m"),
+                    g("std_et_sym_m"),
+                    g("mean_er_sym_deg"),
+                    g("median_er_sym_deg"),
+                    g("std_er_sym_deg")
+                );
             }
             exit::OK
         }
@@ -143,15 +166,20 @@ fn eval(args: &EvalArgs) -> Result<serde_json::Value, String> {
         return Err(format!("{}: no /pose/gt messages", path.display()));
     }
     let mut extra = serde_json::Map::new();
+    let target_spec =
+        args.target.clone().or_else(|| run_meta.and_then(|m| m.get("target_model")).cloned());
+    let (symmetry, symmetry_source) = target_symmetry(
+        args.target_symmetry.as_deref(),
+        target_spec.as_deref(),
+        args.target.is_some(),
+        "hitl eval",
+    )?;
+    extra.insert("symmetry_source".into(), serde_json::json!(symmetry_source));
     let estimates: HashMap<u64, Pose> = match &args.backend {
         None => rec.pose_estimate.iter().map(|p| (p.capture_ns, p.pose)).collect(),
         Some(b) => {
             let spec: BackendSpec = b.parse().map_err(|e| format!("{e}"))?;
-            let target = args
-                .target
-                .clone()
-                .or_else(|| run_meta.and_then(|m| m.get("target_model")).cloned())
-                .unwrap_or_else(|| "asymmetric".to_string());
+            let target = target_spec.clone().unwrap_or_else(|| "asymmetric".to_string());
             let model = TargetModel::from_spec(&target).map_err(|e| e.to_string())?;
             let mut mesh = model.lab_mesh(scale).map_err(|e| e.to_string())?;
             if let Some(n) = args.mesh_faces {
@@ -200,16 +228,8 @@ fn eval(args: &EvalArgs) -> Result<serde_json::Value, String> {
             out
         }
     };
-    let pairs: Vec<PosePair> = rec
-        .pose_gt
-        .iter()
-        .map(|g| PosePair {
-            timestamp_ns: g.capture_ns,
-            gt: g.pose,
-            est: estimates.get(&g.capture_ns).copied(),
-        })
-        .collect();
-    let m = evaluate(&pairs, scale).map_err(|e| e.to_string())?;
+    let pairs = pose_pairs(&rec.pose_gt, &estimates);
+    let m = evaluate_symmetric(&pairs, scale, &symmetry).map_err(|e| e.to_string())?;
     let mut v = m.to_json();
     if args.per_frame {
         extra.insert("per_frame".into(), per_frame(&pairs, &m));
@@ -241,6 +261,62 @@ fn eval(args: &EvalArgs) -> Result<serde_json::Value, String> {
     Ok(v)
 }
 
+/// The symmetry the `_sym` figures are taken up to, and where it came from: `flag`
+/// (`--target-symmetry`), else the declaration of `target` (a built-in's own, an OBJ/STL's
+/// `FILE.symmetry`), else none. A target that cannot be loaded (a recording moved to another
+/// machine) leaves the symmetry undeclared with a warning, unless `strict` (the user named it):
+/// the paper's figures need no model. `who` prefixes the warning.
+pub(crate) fn target_symmetry(
+    flag: Option<&str>,
+    target: Option<&str>,
+    strict: bool,
+    who: &str,
+) -> Result<(Symmetry, String), String> {
+    if let Some(spec) = flag {
+        let s = Symmetry::parse(spec).map_err(|e| format!("--target-symmetry: {e}"))?;
+        return Ok((s, "--target-symmetry".into()));
+    }
+    let Some(target) = target else {
+        return Ok((Symmetry::none(), "no target named (none declared)".into()));
+    };
+    match TargetModel::from_spec(target) {
+        Ok(m) if hitl_perception::models::builtin(target).is_some() => {
+            Ok((m.symmetry_group, format!("built-in target {target}")))
+        }
+        Ok(m) => {
+            let side = Symmetry::sidecar_path(std::path::Path::new(target));
+            let source = if side.exists() {
+                side.display().to_string()
+            } else {
+                format!("{target} (no {} file: none declared)", side.display())
+            };
+            Ok((m.symmetry_group, source))
+        }
+        Err(e) if strict => Err(format!("--target: {e}")),
+        Err(e) => {
+            crate::errln!(
+                "{who}: warning: the run's target {target} cannot be loaded ({e}); the \
+                 symmetry-aware figures assume no symmetry (--target-symmetry declares one)"
+            );
+            Ok((Symmetry::none(), format!("{target} unreadable (none declared)")))
+        }
+    }
+}
+
+/// Ground truth paired with the estimates of the same capture, in capture order.
+pub(crate) fn pose_pairs(
+    gt: &[hitl_record::PoseStamped],
+    estimates: &HashMap<u64, Pose>,
+) -> Vec<PosePair> {
+    gt.iter()
+        .map(|g| PosePair {
+            timestamp_ns: g.capture_ns,
+            gt: g.pose,
+            est: estimates.get(&g.capture_ns).copied(),
+        })
+        .collect()
+}
+
 /// The re-registration policy the recorded run used (none recorded: the default).
 fn recorded_policy(
     run_meta: Option<&std::collections::BTreeMap<String, String>>,
@@ -264,15 +340,16 @@ fn recorded_policy(
 /// that was itself off shows there as a constant offset.
 fn per_frame(pairs: &[PosePair], m: &hitl_perception::metrics::Metrics) -> serde_json::Value {
     let t0 = pairs.first().map_or(0, |p| p.timestamp_ns);
-    let scored: HashMap<u64, (f64, f64)> =
-        m.per_frame.iter().map(|f| (f.timestamp_ns, (f.et_m, f.er_deg))).collect();
+    let scored: HashMap<u64, &hitl_perception::FrameError> =
+        m.per_frame.iter().map(|f| (f.timestamp_ns, f)).collect();
     pairs
         .iter()
         .map(|p| {
             let t_s = p.timestamp_ns.saturating_sub(t0) as f64 / 1e9;
             match scored.get(&p.timestamp_ns) {
-                Some((et, er)) => serde_json::json!({
-                    "timestamp_ns": p.timestamp_ns, "t_s": t_s, "et_m": et, "er_deg": er,
+                Some(f) => serde_json::json!({
+                    "timestamp_ns": p.timestamp_ns, "t_s": t_s, "et_m": f.et_m, "er_deg": f.er_deg,
+                    "et_sym_m": f.et_sym_m, "er_sym_deg": f.er_sym_deg,
                     "raw_er_deg": p.est.map(|e| frame_error(&e, &p.gt, 1.0).1),
                 }),
                 None => serde_json::json!({ "timestamp_ns": p.timestamp_ns, "t_s": t_s }),

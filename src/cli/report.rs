@@ -33,6 +33,35 @@ pub struct ReportArgs {
     /// fly-around's range a wide camera shows the target a few dozen pixels wide).
     #[arg(long, value_name = "Z")]
     pub contact_zoom: Option<f64>,
+    /// The target's symmetry for the report's symmetry-aware pose metrics, as `hitl eval
+    /// --target-symmetry` (default: the run's target's declaration).
+    #[arg(long, value_name = "SPEC")]
+    pub target_symmetry: Option<String>,
+}
+
+/// The paper's pose metrics of a recording and the same up to the target's symmetry, as `hitl
+/// eval --json` gives them (the report's `pose_metrics`).
+fn pose_metrics(
+    rec: &hitl_record::reader::Recording,
+    flag: Option<&str>,
+) -> Result<serde_json::Value, String> {
+    let run = rec.metadata.get("run");
+    let scale = run
+        .and_then(|m| m.get("scale"))
+        .ok_or("the run metadata has no `scale`")?
+        .parse::<f64>()
+        .map_err(|e| format!("run metadata `scale`: {e}"))?;
+    let target = run.and_then(|m| m.get("target_model")).map(String::as_str);
+    let (symmetry, source) = super::eval::target_symmetry(flag, target, false, "hitl report")?;
+    let estimates = rec.pose_estimate.iter().map(|p| (p.capture_ns, p.pose)).collect();
+    let pairs = super::eval::pose_pairs(&rec.pose_gt, &estimates);
+    let m = hitl_perception::metrics::evaluate_symmetric(&pairs, scale, &symmetry)
+        .map_err(|e| e.to_string())?;
+    let mut v = m.to_json();
+    if let Some(o) = v.as_object_mut() {
+        o.insert("symmetry_source".into(), serde_json::json!(source));
+    }
+    Ok(v)
 }
 
 /// The run's target model in lab metres, as `hitl run` and `hitl eval` build it: the `target_model`
@@ -56,7 +85,16 @@ pub fn run(args: ReportArgs) -> u8 {
         crate::errln!("hitl report: --contact-zoom {z} must be a number of at least 1");
         return exit::BAD_INPUT;
     }
+    if let Some(spec) = &args.target_symmetry {
+        if let Err(e) = hitl_perception::models::Symmetry::parse(spec) {
+            crate::errln!("hitl report: --target-symmetry: {e}");
+            return exit::BAD_INPUT;
+        }
+    }
+    let flag = args.target_symmetry.clone();
+    let score = move |rec: &hitl_record::reader::Recording| pose_metrics(rec, flag.as_deref());
     let opts = ReportOptions {
+        pose_metrics: Some(&score),
         contact: ContactOptions {
             frames: args.contact_frames,
             max_width: args.contact_width,

@@ -8,11 +8,13 @@ mod load;
 pub mod look;
 pub mod mesh;
 mod procedural;
+pub mod symmetry;
 
 pub use load::{load_mesh_file, load_model_file};
 pub use look::{Material, Part, Texture};
 pub use mesh::Mesh;
 pub use procedural::{builtin, BUILTIN_NAMES};
+pub use symmetry::Symmetry;
 
 use crate::PerceptionError;
 use std::path::Path;
@@ -39,6 +41,9 @@ pub const GREATEST_DIMENSION_M: f64 = 2.0;
 pub struct TargetModel {
     pub name: String,
     pub symmetry: SymmetryClass,
+    /// The proper rotations that map the target onto itself (what the symmetry-aware score
+    /// forgives): a built-in's own; a file's from its `FILE.symmetry` declaration, else none.
+    pub symmetry_group: Symmetry,
     /// Body-frame mesh in real metres, centred on its bounding-box midpoint: what the
     /// estimators register against.
     pub mesh: Mesh,
@@ -50,7 +55,8 @@ pub struct TargetModel {
 
 impl TargetModel {
     /// A built-in model by name (see [`BUILTIN_NAMES`]) or a path to an `.obj`/`.stl` file, which
-    /// is centred and scaled so its greatest dimension is `GREATEST_DIMENSION_M`.
+    /// is centred and scaled so its greatest dimension is `GREATEST_DIMENSION_M`; a file's
+    /// symmetry comes from the declaration next to it (`FILE.symmetry`, [`Symmetry::read_sidecar`]).
     pub fn from_spec(spec: &str) -> Result<TargetModel, PerceptionError> {
         if let Some(m) = builtin(spec) {
             return Ok(m);
@@ -71,12 +77,15 @@ impl TargetModel {
         let factor = GREATEST_DIMENSION_M / raw.greatest_dimension();
         let mesh = raw.centered().scaled(factor)?;
         let parts = parts.into_iter().map(|p| p.transformed(centre, factor)).collect();
+        let symmetry_group =
+            Symmetry::read_sidecar(path, centre, factor)?.unwrap_or_else(Symmetry::none);
         Ok(TargetModel {
             name: path
                 .file_stem()
                 .map(|s| s.to_string_lossy().into_owned())
                 .unwrap_or_else(|| spec.to_string()),
             symmetry: SymmetryClass::Unknown,
+            symmetry_group,
             mesh,
             parts,
         })

@@ -12,7 +12,7 @@
 //! metal (docs/sim-camera.md).
 
 use super::look::{Material, Part, Texture};
-use super::{Mesh, SymmetryClass, TargetModel, GREATEST_DIMENSION_M};
+use super::{Mesh, Symmetry, SymmetryClass, TargetModel, GREATEST_DIMENSION_M};
 
 /// Names accepted by [`builtin`].
 pub const BUILTIN_NAMES: [&str; 3] = ["asymmetric", "one-plane", "two-planes"];
@@ -23,19 +23,20 @@ const CELL: f64 = 0.1;
 
 /// A built-in target by name, or `None`.
 pub fn builtin(name: &str) -> Option<TargetModel> {
-    let (symmetry, parts) = match name {
-        "two-planes" => (SymmetryClass::TwoPlanes, parts(true, true, false)),
-        "one-plane" => (SymmetryClass::OnePlane, parts(true, false, false)),
-        "asymmetric" => (SymmetryClass::None, parts(true, false, true)),
+    let (symmetry, group, parts) = match name {
+        "two-planes" => (SymmetryClass::TwoPlanes, "two-planes:z", parts(true, true, false)),
+        "one-plane" => (SymmetryClass::OnePlane, "one-plane", parts(true, false, false)),
+        "asymmetric" => (SymmetryClass::None, "none", parts(true, false, true)),
         _ => return None,
     };
+    let symmetry_group = Symmetry::parse(group).ok()?;
     let raw = Mesh::new(parts.vertices, parts.faces).ok()?;
     let (lo, hi) = raw.bounds();
     let centre = [0.5 * (lo[0] + hi[0]), 0.5 * (lo[1] + hi[1]), 0.5 * (lo[2] + hi[2])];
     let factor = GREATEST_DIMENSION_M / raw.greatest_dimension();
     let mesh = raw.centered().scaled(factor).ok()?;
     let parts = parts.parts.into_iter().map(|p| p.transformed(centre, factor)).collect();
-    Some(TargetModel { name: name.to_string(), symmetry, mesh, parts })
+    Some(TargetModel { name: name.to_string(), symmetry, symmetry_group, mesh, parts })
 }
 
 /// The kinds of part a procedural spacecraft is made of, each with its material.

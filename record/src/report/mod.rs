@@ -35,7 +35,14 @@ pub struct ReportOutput {
 #[derive(Clone, Copy, Default)]
 pub struct ReportOptions<'a> {
     pub contact: ContactOptions<'a>,
+    /// The paper's calibrated pose metrics of the recording, and the same up to the target's
+    /// symmetry, as one JSON object (`hitl eval --json`'s keys): the report shows them beside its
+    /// own uncalibrated pose error. The caller scores (the perception crate); `None`: not shown.
+    pub pose_metrics: Option<&'a PoseMetricsFn>,
 }
+
+/// Scores a recording's estimates (see [`ReportOptions::pose_metrics`]); `Err` says why not.
+pub type PoseMetricsFn = dyn Fn(&Recording) -> Result<serde_json::Value, String>;
 
 /// The default output folder: `RUN_report/` next to `RUN.mcap`.
 pub fn default_out_dir(mcap: &Path) -> PathBuf {
@@ -108,6 +115,36 @@ fn clear_previous(dir: &Path) -> Result<(), ReportError> {
     }
 }
 
+/// The paper's metrics and the symmetry-aware ones, as table rows.
+fn pose_metrics_html(h: &mut String, m: &serde_json::Value) {
+    let g = |k: &str| m.get(k).and_then(serde_json::Value::as_f64);
+    let f = |x: Option<f64>, d: usize| x.map_or("-".to_string(), |x| format!("{x:.d$}"));
+    if let Some(e) = m.get("error").and_then(serde_json::Value::as_str) {
+        h.push_str(&format!(
+            "<tr><th>paper's pose metrics</th><td>not scored: {}</td></tr>",
+            esc(e)
+        ));
+        return;
+    }
+    h.push_str(&format!(
+        "<tr><th>paper's pose metrics</th><td>{} frames, {} failures: e_t mean {} m (median {}), e_r mean {}&deg; (median {}) after the first-frame calibration</td></tr>",
+        m.get("frames").unwrap_or(&serde_json::Value::Null),
+        m.get("failures").unwrap_or(&serde_json::Value::Null),
+        f(g("mean_et_m"), 4),
+        f(g("median_et_m"), 4),
+        f(g("mean_er_deg"), 2),
+        f(g("median_er_deg"), 2),
+    ));
+    h.push_str(&format!(
+        "<tr><th>up to symmetry ({})</th><td>e_t mean {} m (median {}), e_r mean {}&deg; (median {}): each frame against the nearest of the target's indistinguishable poses</td></tr>",
+        esc(m.get("symmetry").and_then(serde_json::Value::as_str).unwrap_or("none")),
+        f(g("mean_et_sym_m"), 4),
+        f(g("median_et_sym_m"), 4),
+        f(g("mean_er_sym_deg"), 2),
+        f(g("median_er_sym_deg"), 2),
+    ));
+}
+
 /// Read `mcap` and write the report into `out_dir` (default: [`default_out_dir`]); the contact
 /// sheet has no target model, so it shows the recorded masks only.
 pub fn write_report(mcap: &Path, out_dir: Option<&Path>) -> Result<ReportOutput, ReportError> {
@@ -130,6 +167,12 @@ pub fn write_report_with(
         let (sheet, pngs) = contact::write_contact_sheet(mcap, &rec, &dir, &opts.contact)?;
         summary.contact_sheet = Some(sheet);
         files.extend(pngs);
+    }
+    if let Some(score) = opts.pose_metrics.filter(|_| !rec.pose_estimate.is_empty()) {
+        summary.pose_metrics = Some(match score(&rec) {
+            Ok(v) => v,
+            Err(e) => serde_json::json!({ "error": e }),
+        });
     }
     let sj = dir.join("summary.json");
     let text = serde_json::to_string_pretty(&summary)
@@ -219,6 +262,9 @@ fn index_html(mcap: &Path, s: &Summary, plots: &[(&str, &str)]) -> String {
                 p.pairs, t.mean, t.max, r.mean, r.max
             ));
         }
+    }
+    if let Some(m) = &s.pose_metrics {
+        pose_metrics_html(&mut h, m);
     }
     let drops: u64 = s.dropped.values().sum();
     h.push_str(&format!(
