@@ -864,10 +864,9 @@ mod tests {
         assert!(run(&traj, &lab, 250.0).is_safe());
     }
 
-    #[test]
-    fn the_tcp_speed_is_checked_against_the_lab() {
-        // Joint 1 swings the outstretched arm 0.8 rad in 1 s: inside every joint limit of a lab
-        // that allows 2 rad/s, but the flange, ~0.5 m out, peaks near 0.75 m/s.
+    /// Joint 1 swings the outstretched arm 0.8 rad in 1 s: inside every joint limit of a lab
+    /// that allows 2 rad/s, but the flange, ~0.5 m out, peaks near 0.75 m/s.
+    fn swing_of_the_outstretched_arm() -> (Trajectory, LabConfig) {
         let mut traj = comfortable(3, 0.5, 0.0);
         traj.t = vec![0.0, 1.0, 2.0];
         traj.qpos[1][0] = 0.8;
@@ -876,6 +875,12 @@ mod tests {
         lab.limits.acceleration_rad_s2 = [100.0; DOF];
         lab.limits.jerk_rad_s3 = [1000.0; DOF];
         lab.limits.max_step_rad = 0.1;
+        (traj, lab)
+    }
+
+    #[test]
+    fn the_tcp_speed_is_checked_against_the_lab() {
+        let (traj, mut lab) = swing_of_the_outstretched_arm();
         let r = run(&traj, &lab, 250.0);
         assert!(r.is_safe(), "{:#?}", r.violations);
         let peak = r.tcp_speed.peak_m_s;
@@ -919,14 +924,7 @@ mod tests {
     #[test]
     fn the_tcp_speed_has_a_speed_scale_remedy() {
         // The motion of the TCP test, refused for TCP speed alone.
-        let mut traj = comfortable(3, 0.5, 0.0);
-        traj.t = vec![0.0, 1.0, 2.0];
-        traj.qpos[1][0] = 0.8;
-        let mut lab = LabConfig::default();
-        lab.limits.velocity_rad_s = [2.0; DOF];
-        lab.limits.acceleration_rad_s2 = [100.0; DOF];
-        lab.limits.jerk_rad_s3 = [1000.0; DOF];
-        lab.limits.max_step_rad = 0.1;
+        let (traj, mut lab) = swing_of_the_outstretched_arm();
         let peak = run(&traj, &lab, 250.0).tcp_speed.peak_m_s;
         lab.limits.tcp_speed_m_s = 0.5 * peak;
         let table = SetpointTable::build(&traj, 250.0, 1.0).expect("table");
