@@ -98,8 +98,8 @@ fn a_misspelt_light_is_bad_input() {
     assert!(text(&out).contains("unknown light kind"), "{}", text(&out));
 }
 
-/// A trigger box on a pty: acknowledges every command and reports its inputs every 20 ms with
-/// the door open, until `done`.
+/// A trigger box on a pty (protocol 2): answers every command (`V` with its versions) and
+/// reports its inputs every 20 ms with the door open, until `done`.
 fn trigger_box_peer(mut peer: PtyPeer, done: Arc<AtomicBool>) {
     let start = Instant::now();
     let mut line = Vec::new();
@@ -111,8 +111,16 @@ fn trigger_box_peer(mut peer: PtyPeer, done: Arc<AtomicBool>) {
                 continue;
             }
             let text = String::from_utf8(std::mem::take(&mut line)).expect("ASCII");
+            if text.is_empty() {
+                continue; // ignored, not answered (protocol 2)
+            }
             let seq = text.split(' ').nth(1).unwrap_or("0").to_string();
-            peer.write(format!("A {seq} {}\n", start.elapsed().as_micros()).as_bytes());
+            let us = start.elapsed().as_micros();
+            if text.starts_with("V ") {
+                peer.write(format!("V {seq} {us} 2 0.1.0\n").as_bytes());
+            } else {
+                peer.write(format!("A {seq} {us}\n").as_bytes());
+            }
         }
         if last.elapsed() >= Duration::from_millis(20) {
             peer.write(format!("I {} 0 1\n", start.elapsed().as_micros()).as_bytes());
@@ -133,7 +141,7 @@ fn probe_pings_the_trigger_box_and_prints_its_inputs() {
     thread.join().expect("peer");
     let all = text(&out);
     assert_eq!(out.status.code(), Some(0), "{all}");
-    assert!(all.contains("answered the ping; e-stop released, door OPEN"), "{all}");
+    assert!(all.contains("firmware 0.1.0, protocol 2; e-stop released, door OPEN"), "{all}");
 }
 
 #[test]

@@ -1,5 +1,5 @@
 //! `hitl run` end to end with the serial devices: a pseudo-terminal peer plays the Enttec DMX
-//! widget or the trigger box (protocol v1, docs/trigger-box-protocol.md) while the binary drives
+//! widget or the trigger box (protocol 2, docs/trigger-box-protocol.md) while the binary drives
 //! the embedded stub. The levels the peer receives follow the trajectory's light schedule, the
 //! trigger box fires at the capture ticks, and every device fault (peer gone, door, e-stop,
 //! input silence, `E` line) ends the run with its reaction, exit code and `/safety/event`, the
@@ -8,58 +8,22 @@
 mod common;
 #[path = "../drivers/tests/light_pty/mod.rs"]
 mod light_pty;
+mod serial_peers;
 
 use common::SHARED_VM_LAB;
 use hitl_record::reader::{read_recording, Recording};
 use hitl_record::Phase;
+use hitl_trajectories::npz;
 use hitl_trajectories::timing::SetpointTable;
-use hitl_trajectories::{npz, Trajectory};
 use light_pty::PtyPeer;
-use std::path::{Path, PathBuf};
+use serial_peers::{changes, dmx_peer, trajectory};
+use std::path::PathBuf;
 use std::process::{Command, Output, Stdio};
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::{Arc, Mutex};
 use std::time::{Duration, Instant};
 
 static ONE_AT_A_TIME: Mutex<()> = Mutex::new(());
-
-/// The stub's power-up pose (no approach).
-const HOME: [f64; 7] = [0.0, -0.5, 0.0, 0.9, 0.0, 1.4, 0.0];
-
-/// The light schedule: 0.2 for the first second, 0.6 for the second, 1.0 after.
-fn level_at(t: f64) -> f32 {
-    if t < 1.0 {
-        0.2
-    } else if t < 2.0 {
-        0.6
-    } else {
-        1.0
-    }
-}
-
-/// A 3 s sweep of joint 1 with captures at 0, 1, 2 and 3 s and the stepped light schedule.
-fn trajectory(dir: &Path) -> PathBuf {
-    let n = 31;
-    let t: Vec<f64> = (0..n).map(|i| i as f64 * 0.1).collect();
-    let qpos = t
-        .iter()
-        .map(|&t| {
-            let mut q = HOME;
-            q[0] = -0.3 * (std::f64::consts::PI * t / 3.0).sin().powi(2);
-            q
-        })
-        .collect();
-    let traj = Trajectory {
-        qpos,
-        capture: Some((0..n).map(|i| i % 10 == 0).collect()),
-        light: Some(t.iter().map(|&t| level_at(t)).collect()),
-        t,
-        ..Default::default()
-    };
-    let path = dir.join("lit.npz");
-    npz::save(&path, &traj, false).expect("write the trajectory");
-    path
-}
 
 struct Run {
     out: Output,
@@ -137,66 +101,7 @@ fn run_with_devices<T: Send + 'static>(
 }
 
 // ---------------------------------------------------------------------------------------------
-// DMX: the peer decodes Enttec label-6 messages.
-
-/// Channel 1 of every DMX frame received, with its arrival time.
-fn decode_dmx(pending: &mut Vec<u8>, at: Instant, out: &mut Vec<(Instant, u8)>) {
-    loop {
-        // Resynchronise on the start byte; anything before it is not a message.
-        match pending.iter().position(|&b| b == 0x7E) {
-            Some(0) => {}
-            Some(i) => {
-                pending.drain(..i);
-            }
-            None => {
-                pending.clear();
-                return;
-            }
-        }
-        if pending.len() < 4 {
-            return;
-        }
-        assert_eq!(pending[1], 6, "label 6 (Output Only Send DMX Packet Request)");
-        let len = usize::from(pending[2]) | usize::from(pending[3]) << 8;
-        assert!((25..=513).contains(&len), "data length {len}");
-        if pending.len() < 4 + len + 1 {
-            return;
-        }
-        assert_eq!(pending[4], 0, "DMX start code 0");
-        assert_eq!(pending[4 + len], 0xE7, "end byte");
-        out.push((at, pending[5]));
-        pending.drain(..4 + len + 1);
-    }
-}
-
-/// Plays the widget: decodes frames until the run ends, or until channel 1 has shown
-/// `close_at` (then it closes its end: the adapter is unplugged).
-fn dmx_peer(peer: PtyPeer, close_at: Option<u8>, done: Arc<AtomicBool>) -> Vec<(Instant, u8)> {
-    let mut peer = peer;
-    let mut frames = Vec::new();
-    let mut pending = Vec::new();
-    while !done.load(Ordering::Acquire) {
-        let bytes = peer.read_some(1, Duration::from_millis(10));
-        pending.extend_from_slice(&bytes);
-        decode_dmx(&mut pending, Instant::now(), &mut frames);
-        if close_at.is_some_and(|v| frames.iter().any(|f| f.1 == v)) {
-            drop(peer);
-            return frames;
-        }
-    }
-    frames
-}
-
-/// Channel-1 values in the order they changed.
-fn changes(frames: &[(Instant, u8)]) -> Vec<u8> {
-    let mut out: Vec<u8> = Vec::new();
-    for &(_, v) in frames {
-        if out.last() != Some(&v) {
-            out.push(v);
-        }
-    }
-    out
-}
+// DMX: the widget peer (tests/serial_peers) decodes Enttec label-6 messages.
 
 #[test]
 fn dmx_levels_follow_the_light_schedule() {
@@ -243,7 +148,7 @@ fn a_dmx_widget_that_goes_away_stops_the_run_with_exit_5() {
 }
 
 // ---------------------------------------------------------------------------------------------
-// The trigger box: the peer speaks protocol v1.
+// The trigger box: the peer speaks protocol 2 (answers `V`, sends its banner first).
 
 /// What the box does once the level has reached 0.6 (one second into playback).
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -282,6 +187,8 @@ fn box_peer_with(
     let (mut estop, mut door, mut silent, mut acted) = (false, false, false, false);
     let mut line = Vec::new();
     let mut last_inputs: Option<Instant> = None;
+    // A box starting: its banner (ignored by the driver before its ping is answered).
+    peer.write(b"# hitl-trigger-box 0.1.0 protocol 2 reset=power\n");
     while !done.load(Ordering::Acquire) {
         for b in peer.read_some(1, Duration::from_millis(5)) {
             if b != b'\n' {
@@ -289,10 +196,13 @@ fn box_peer_with(
                 continue;
             }
             let text = String::from_utf8(std::mem::take(&mut line)).expect("ASCII from the host");
+            if text.is_empty() {
+                continue; // the host's `\n` after opening: ignored (protocol 2)
+            }
             let f: Vec<&str> = text.split(' ').collect();
             assert!(text.len() < 64, "line within 64 bytes: {text:?}");
             match f[0] {
-                "P" | "S" => {}
+                "P" | "S" | "V" => {}
                 "L" => log.levels.push(f[2].parse().expect("permille")),
                 "F" => log.fires.push((f[2].parse().expect("tick"), f[3].parse().expect("mask"))),
                 other => panic!("unknown command {other:?} in {text:?}"),
@@ -302,7 +212,11 @@ fn box_peer_with(
                 log.fire_us.push(at);
                 first_fire.get_or_insert_with(Instant::now);
             }
-            peer.write(format!("A {} {at}\n", f[1]).as_bytes());
+            if f[0] == "V" {
+                peer.write(format!("V {} {at} 2 0.1.0\n", f[1]).as_bytes());
+            } else {
+                peer.write(format!("A {} {at}\n", f[1]).as_bytes());
+            }
         }
         let since_first_fire = first_fire.map_or(Duration::ZERO, |t| t.elapsed());
         if !acted && act(&log, since_first_fire) {

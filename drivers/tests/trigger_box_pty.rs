@@ -1,16 +1,19 @@
-//! The trigger-box driver against a pty peer that plays the box: fires acknowledged with device
-//! timestamps, input reports, light commands, and garbage / silence / unplug as faults.
+//! The trigger-box driver against a pty peer that plays the box (protocol 2): fires acknowledged
+//! with device timestamps and mapped onto the host's clock, input reports, light commands, the
+//! version check, banners and notices, keep-alives, busy answers retried, and garbage / silence /
+//! unplug / restart as faults.
 
 #![allow(clippy::unwrap_used)]
 
 mod light_pty;
 
 use std::collections::HashMap;
-use std::sync::atomic::{AtomicBool, Ordering};
+use std::sync::atomic::{AtomicBool, AtomicU16, AtomicU32, Ordering};
 use std::sync::{Arc, Mutex};
 use std::thread::JoinHandle;
 use std::time::Duration;
 
+use hitl_drivers::light::protocol::ResetCause;
 use hitl_drivers::light::{TriggerBox, TriggerBoxConfig};
 use hitl_hal::{
     Clock, Error, ErrorKind, Inputs, Lifecycle, Light, MonotonicClock, Trigger, TriggerLines,
@@ -27,6 +30,12 @@ struct Behaviour {
     door: AtomicBool,
     unplug: AtomicBool,
     stop: AtomicBool,
+    /// The protocol `V` answers with; 0: answer `E <seq> 2` (a protocol-1 box).
+    protocol: AtomicU16,
+    /// Answer this many `F` lines with `E <seq> 3` (busy).
+    busy_fires: AtomicU32,
+    /// Drop this many commands without an answer, then say so with `E 0 3`.
+    drop_commands: AtomicU32,
     /// Raw bytes to send once.
     inject: Mutex<Vec<u8>>,
     /// Lines received from the host.
@@ -46,10 +55,18 @@ struct BoxPeer {
 
 impl BoxPeer {
     fn start() -> Self {
+        Self::start_with(|_| {})
+    }
+
+    /// A peer whose behaviour is set up by `setup` before it sends anything (e.g. a banner to
+    /// inject first, or the version it answers with).
+    fn start_with(setup: impl FnOnce(&Behaviour)) -> Self {
         let b = Arc::new(Behaviour::default());
+        b.protocol.store(2, Ordering::SeqCst);
         b.ack_fires.store(true, Ordering::SeqCst);
         b.ack_other.store(true, Ordering::SeqCst);
         b.send_inputs.store(true, Ordering::SeqCst);
+        setup(&b);
         let mut pty = PtyPeer::new();
         let path = pty.path.clone();
         let bb = Arc::clone(&b);
@@ -82,6 +99,9 @@ impl BoxPeer {
                         continue;
                     }
                     let text = String::from_utf8(std::mem::take(&mut line)).unwrap();
+                    if text.is_empty() {
+                        continue; // an empty line is ignored, not answered (protocol 2)
+                    }
                     let mut f = text.split(' ');
                     let kind = f.next().unwrap_or_default().to_string();
                     let seq: u32 = f.next().and_then(|s| s.parse().ok()).unwrap_or(0);
@@ -91,11 +111,31 @@ impl BoxPeer {
                     } else {
                         bb.ack_other.load(Ordering::SeqCst)
                     };
+                    let take = |n: &AtomicU32| {
+                        n.fetch_update(Ordering::SeqCst, Ordering::SeqCst, |v| v.checked_sub(1))
+                            .is_ok()
+                    };
+                    if take(&bb.drop_commands) {
+                        if bb.drop_commands.load(Ordering::SeqCst) == 0 {
+                            pty.write(b"E 0 3\n");
+                        }
+                        continue;
+                    }
+                    if kind == "F" && take(&bb.busy_fires) {
+                        pty.write(format!("E {seq} 3\n").as_bytes());
+                        continue;
+                    }
                     if ack {
                         let device_us = u64::try_from(t0.elapsed().as_micros() + DEVICE_EPOCH_US)
                             .unwrap_or(u64::MAX);
                         bb.acked.lock().unwrap().insert(seq, device_us);
-                        pty.write(format!("A {seq} {device_us}\n").as_bytes());
+                        let protocol = bb.protocol.load(Ordering::SeqCst);
+                        let answer = match (kind.as_str(), protocol) {
+                            ("V", 0) => format!("E {seq} 2\n"),
+                            ("V", p) => format!("V {seq} {device_us} {p} 0.1.0\n"),
+                            _ => format!("A {seq} {device_us}\n"),
+                        };
+                        pty.write(answer.as_bytes());
                     }
                 }
             }
@@ -146,7 +186,13 @@ async fn fires_are_acknowledged_with_device_timestamps() {
     let peer = BoxPeer::start();
     let clock = MonotonicClock::new();
     let mut tb = TriggerBox::open(&peer.path, config(), clock).await.expect("open trigger box");
-    assert_eq!(peer.received().first().map(String::as_str), Some("P 1"), "open pings first");
+    assert_eq!(
+        peer.received().get(..2),
+        Some(&["P 1".to_string(), "V 2".to_string()][..]),
+        "open pings, then asks the version"
+    );
+    let v = tb.version().expect("version known once open");
+    assert_eq!((v.protocol, v.firmware.to_string().as_str()), (2, "0.1.0"));
 
     let fired_ns = clock.now_ns();
     tb.fire(7, BOTH).expect("fire");
@@ -154,24 +200,27 @@ async fn fires_are_acknowledged_with_device_timestamps() {
         .await
         .expect("ack");
     assert_eq!(r.tick, 7);
-    assert_eq!(Some(r.device_us), peer.acked(2), "the ack's device time of command seq 2");
+    assert_eq!(Some(r.device_us), peer.acked(3), "the ack's device time of command seq 3");
     assert!(r.acked_ns > fired_ns);
-    // The box's time maps onto the host clock between the fire call and the ack's arrival.
-    let host = tb.device_to_host_ns(r.device_us).expect("offset estimated from acks");
-    let slack = tb.clock_uncertainty_ns().expect("uncertainty") + 2_000_000;
+    // The box's time maps onto the host clock between the fire call and the ack's arrival,
+    // within the mapping's own bound.
+    let host = r.host_ns.expect("the fire on the host's clock");
+    let err = r.host_error_ns.expect("its bound");
+    assert_eq!(tb.device_to_host_ns(r.device_us), Some(host));
     assert!(
-        host + slack >= fired_ns && host <= r.acked_ns + slack,
-        "mapped {host} outside [{fired_ns}, {}] +- {slack}",
+        host + err >= fired_ns && host <= r.acked_ns + err,
+        "mapped {host} outside [{fired_ns}, {}] +- {err}",
         r.acked_ns
     );
-    assert!(peer.received().contains(&"F 2 7 3".to_string()), "{:?}", peer.received());
+    assert!(err < 2 * (r.acked_ns - fired_ns) + 2_000_000, "bound {err} ns");
+    assert!(peer.received().contains(&"F 3 7 3".to_string()), "{:?}", peer.received());
 
     tb.fire(8, CAMERA).expect("fire");
     let r = eventually(Duration::from_secs(2), || tb.poll_fired().expect("no fault"))
         .await
         .expect("ack");
-    assert_eq!((r.tick, Some(r.device_us)), (8, peer.acked(3)));
-    assert!(peer.received().contains(&"F 3 8 1".to_string()), "{:?}", peer.received());
+    assert_eq!((r.tick, Some(r.device_us)), (8, peer.acked(4)));
+    assert!(peer.received().contains(&"F 4 8 1".to_string()), "{:?}", peer.received());
     assert_eq!(tb.poll_fired().expect("no fault"), None);
 
     let e = tb.fire(9, TriggerLines::default()).unwrap_err();
@@ -309,12 +358,178 @@ async fn a_silent_box_fails_to_open_naming_the_port() {
     let peer = BoxPeer::start();
     peer.b.ack_other.store(false, Ordering::SeqCst);
     peer.b.send_inputs.store(false, Ordering::SeqCst);
-    let cfg = TriggerBoxConfig { open_timeout: Duration::from_millis(300), ..config() };
+    let cfg = TriggerBoxConfig {
+        open_timeout: Duration::from_millis(300),
+        start_timeout: Duration::from_millis(300),
+        ..config()
+    };
     let Err(e) = TriggerBox::open(&peer.path, cfg, MonotonicClock::new()).await else {
         panic!("a silent box must not open");
     };
     assert!(matches!(e.kind(), ErrorKind::Timeout), "{e}");
     assert!(e.to_string().contains(&peer.path), "{e}");
+    assert!(e.to_string().contains("not a line from it"), "{e}");
+    assert!(peer.received().is_empty(), "nothing written before the box spoke");
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn a_box_that_reports_but_does_not_answer_fails_to_open() {
+    let peer = BoxPeer::start();
+    peer.b.ack_other.store(false, Ordering::SeqCst);
+    let cfg = TriggerBoxConfig {
+        open_timeout: Duration::from_millis(300),
+        ack_timeout: Duration::from_secs(1),
+        ..config()
+    };
+    let Err(e) = TriggerBox::open(&peer.path, cfg, MonotonicClock::new()).await else {
+        panic!("a box that does not answer must not open");
+    };
+    assert!(matches!(e.kind(), ErrorKind::Timeout), "{e}");
+    assert!(e.to_string().contains("no answer to the ping"), "{e}");
+}
+
+/// An Uno that resets when its port is opened: silent in its bootloader (longer than the
+/// ordinary open timeout), then the banner: nothing may be written before it.
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn open_waits_for_a_box_that_resets_and_ignores_its_banner() {
+    let peer = BoxPeer::start_with(|b| b.send_inputs.store(false, Ordering::SeqCst));
+    let b = Arc::clone(&peer.b);
+    let path = peer.path.clone();
+    let opening = tokio::spawn(async move {
+        let cfg = TriggerBoxConfig { open_timeout: Duration::from_millis(500), ..config() };
+        TriggerBox::open(&path, cfg, MonotonicClock::new()).await
+    });
+    tokio::time::sleep(Duration::from_millis(800)).await;
+    assert!(peer.received().is_empty(), "nothing written to a box in its bootloader");
+    // A partial line first (the end of what it sent before): dropped.
+    b.inject
+        .lock()
+        .unwrap()
+        .extend_from_slice(b"0 0\n# hitl-trigger-box 0.1.0 protocol 2 reset=external\n");
+    b.send_inputs.store(true, Ordering::SeqCst);
+    let tb = opening.await.unwrap().expect("opens after the banner");
+    assert!(tb.fault().is_none());
+    assert_eq!(tb.restart_cause(), None, "a banner before the ping is the box starting");
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn a_banner_after_opening_means_the_box_restarted() {
+    let peer = BoxPeer::start();
+    let mut tb = open(&peer).await;
+    peer.inject(b"# hitl-trigger-box 0.1.0 protocol 2 reset=watchdog\n");
+    let msg = expect_fault(&mut tb, ErrorKind::DeviceFault).await;
+    assert!(msg.contains("restarted"), "{msg}");
+    assert_eq!(tb.restart_cause(), Some(ResetCause::Watchdog));
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn notices_are_ignored_and_host_silence_sends_the_level_again() {
+    let peer = BoxPeer::start();
+    let mut tb = open(&peer).await;
+    tb.set_level(0.5).expect("level");
+    eventually(Duration::from_secs(2), || {
+        peer.received().iter().any(|l| l.starts_with("L ")).then_some(())
+    })
+    .await
+    .expect("level sent");
+    peer.inject(b"# a note for people\n# safe host-silent\n");
+    let levels = eventually(Duration::from_secs(2), || {
+        let n = peer.received().iter().filter(|l| l.starts_with("L ")).count();
+        (n == 2).then_some(n)
+    })
+    .await;
+    assert_eq!(levels, Some(2), "the level again after the box went safe: {:?}", peer.received());
+    assert_eq!(tb.host_silent_notices(), 1);
+    assert!(tb.fault().is_none(), "notices are not faults");
+    tb.read().expect("inputs");
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn keepalive_pings_when_nothing_else_is_written() {
+    let peer = BoxPeer::start();
+    let tb = open(&peer).await;
+    tokio::time::sleep(Duration::from_millis(1100)).await;
+    let pings = peer.received().iter().filter(|l| l.starts_with("P ")).count();
+    // The open's ping, then one every 250 ms.
+    assert!((4..=6).contains(&pings), "{pings} pings in 1.1 s: {:?}", peer.received());
+    assert!(tb.keepalives_sent() >= 3);
+    assert!(tb.fault().is_none());
+    // The pings' round trips keep the clock mapping fed.
+    let m = tb.clock_mapping().expect("mapping");
+    assert!(m.samples >= 5, "{m:?}");
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn another_protocol_version_is_refused_naming_both() {
+    let peer = BoxPeer::start_with(|b| b.protocol.store(3, Ordering::SeqCst));
+    let Err(e) = TriggerBox::open(&peer.path, config(), MonotonicClock::new()).await else {
+        panic!("protocol 3 must be refused");
+    };
+    assert_eq!(e.kind(), ErrorKind::Protocol, "{e}");
+    let msg = e.to_string();
+    assert!(
+        msg.contains("protocol 3 (firmware 0.1.0)") && msg.contains("speaks protocol 2"),
+        "{msg}"
+    );
+    assert!(msg.contains(&peer.path), "{msg}");
+
+    let v1 = BoxPeer::start_with(|b| b.protocol.store(0, Ordering::SeqCst));
+    let Err(e) = TriggerBox::open(&v1.path, config(), MonotonicClock::new()).await else {
+        panic!("a protocol-1 box must be refused");
+    };
+    assert_eq!(e.kind(), ErrorKind::Protocol, "{e}");
+    assert!(e.to_string().contains("does not know the V command"), "{e}");
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn a_busy_fire_is_sent_again_and_counted_not_a_fault() {
+    let peer = BoxPeer::start();
+    // Room for the retry: the peer's busy answer may take a few ms on a loaded machine.
+    let cfg = TriggerBoxConfig { busy_retry_for: Duration::from_millis(200), ..config() };
+    let mut tb = TriggerBox::open(&peer.path, cfg, MonotonicClock::new()).await.expect("open");
+    peer.b.busy_fires.store(1, Ordering::SeqCst);
+    tb.fire(11, CAMERA).expect("fire");
+    let r = eventually(Duration::from_secs(2), || tb.poll_fired().expect("no fault"))
+        .await
+        .expect("the retried fire is acknowledged");
+    assert_eq!(r.tick, 11);
+    let fires: Vec<String> = peer.received().into_iter().filter(|l| l.starts_with("F ")).collect();
+    assert_eq!(fires.len(), 2, "sent twice: {fires:?}");
+    assert!(fires.iter().all(|l| l.ends_with(" 11 1")), "{fires:?}");
+    let busy = tb.busy();
+    assert_eq!((busy.answers, busy.retried, busy.given_up), (1, 1, 0));
+
+    // Busy for longer than the retry window: given up, counted, still not a fault.
+    let peer = BoxPeer::start_with(|b| b.busy_fires.store(100, Ordering::SeqCst));
+    let quick = TriggerBoxConfig { busy_retry_for: Duration::ZERO, ..config() };
+    let mut tb = TriggerBox::open(&peer.path, quick, MonotonicClock::new()).await.expect("open");
+    tb.fire(12, CAMERA).expect("fire");
+    eventually(Duration::from_secs(2), || (tb.busy().given_up == 1).then_some(()))
+        .await
+        .expect("given up");
+    assert_eq!(tb.poll_fired().expect("no fault"), None);
+    tb.health().expect("busy is never a fault");
+}
+
+/// `E 0 3`: the box dropped a command (its queue was full); the unanswered one is sent again.
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn a_command_the_box_dropped_is_sent_again() {
+    let peer = BoxPeer::start();
+    let mut tb = open(&peer).await;
+    peer.b.drop_commands.store(1, Ordering::SeqCst);
+    // The fire goes first and is dropped; the level after it is answered, which shows the fire
+    // was the one dropped.
+    tb.fire(5, CAMERA).expect("fire");
+    tb.set_level(0.75).expect("level");
+    let r = eventually(Duration::from_secs(2), || tb.poll_fired().expect("no fault"))
+        .await
+        .expect("fire acknowledged");
+    assert_eq!(r.tick, 5);
+    let fires: Vec<String> = peer.received().into_iter().filter(|l| l.starts_with("F ")).collect();
+    assert_eq!(fires.len(), 2, "the dropped fire again: {:?}", peer.received());
+    let busy = tb.busy();
+    assert_eq!((busy.answers, busy.retried), (1, 1));
+    tb.health().expect("not a fault");
 }
 
 /// `stop` writes what the tick queued, ends the task and lets go of the port (it can be opened

@@ -18,6 +18,11 @@ pub struct FireReport {
     pub device_us: u64,
     /// Host monotonic time the acknowledgement arrived, nanoseconds.
     pub acked_ns: u64,
+    /// When it fired on the host's monotonic clock, nanoseconds: `device_us` through the
+    /// device's clock mapping (`None` where the device's clock is not mapped).
+    pub host_ns: Option<u64>,
+    /// A bound on `host_ns`'s error, nanoseconds.
+    pub host_error_ns: Option<u64>,
 }
 
 /// A device that fires trigger lines. `fire` is called from the tick and must not block.

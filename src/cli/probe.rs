@@ -1,10 +1,12 @@
 //! `hitl probe`: commission the enclosure's devices without moving anything.
 //!
 //! Lists the serial ports and cameras it can see, then opens each device the operator names and
-//! prints what it answers: the trigger box's inputs, the DMX widget, the arm's identity, state,
-//! codes and joint-limit table, the camera's profiles and sync modes. Nothing is enabled and no
-//! command that could move the arm is sent (only reads: serial number, version, state, codes).
-//! Exit 0 when every named device answered, 5 naming the first one that did not, 2 for bad flags.
+//! prints what it answers: the trigger box's firmware, protocol, inputs and clock (and, with
+//! `--test-fire N`, N camera pulses with their times and round trips), the DMX widget, the arm's
+//! identity, state, codes and joint-limit table, the camera's profiles and sync modes. Nothing is
+//! enabled and no command that could move the arm is sent (only reads: serial number, version,
+//! state, codes). Exit 0 when every named device answered, 5 naming the first one that did not,
+//! 2 for bad flags.
 
 use crate::cli::device_flags::DeviceFlags;
 use crate::devices::{CameraSpec, LightSpec, TriggerSpec};
@@ -13,7 +15,7 @@ use crate::{errln, outln};
 use hitl_drivers::light::enttec::{probe_widget, Reply};
 use hitl_drivers::light::{TriggerBox, TriggerBoxConfig};
 use hitl_drivers::xarm::{ClientConfig, XarmClient};
-use hitl_hal::{Arm as _, Inputs as _, MonotonicClock};
+use hitl_hal::{Arm as _, Clock as _, Inputs as _, MonotonicClock, Trigger as _, TriggerLines};
 use hitl_trajectories::joint_table::JointTable;
 use std::time::Duration;
 
@@ -23,6 +25,11 @@ use std::time::Duration;
 pub struct ProbeArgs {
     #[command(flatten)]
     pub devices: DeviceFlags,
+    /// Fire the trigger box's camera line N times (20 ms apart) and print each pulse's time on
+    /// the box's clock and on the host's, and the round trips (needs a box: --trigger or
+    /// --light trigger:DEV). Exit 5 unless every pulse was acknowledged.
+    #[arg(long, value_name = "N", value_parser = clap::value_parser!(u32).range(1..=10_000))]
+    pub test_fire: Option<u32>,
 }
 
 /// One named device that did not answer.
@@ -32,21 +39,34 @@ struct Failed {
 }
 
 pub fn run(args: ProbeArgs) -> u8 {
+    let d = &args.devices;
+    let trigger_port = d.trigger.as_ref().and_then(TriggerSpec::port);
+    let light_box = matches!(&d.light, Some(LightSpec::Trigger { .. }));
+    if args.test_fire.is_some() && trigger_port.is_none() && !light_box {
+        errln!(
+            "probe: --test-fire needs a trigger box (--trigger trigger:DEV or --light trigger:DEV)"
+        );
+        return exit::BAD_INPUT;
+    }
     list_serial_ports();
     let mut failed: Vec<Failed> = Vec::new();
-    let d = &args.devices;
+    // A box named as both light and trigger answers once (and test-fires as the trigger).
+    let probed_as_light =
+        |port: &str| matches!(&d.light, Some(LightSpec::Trigger { port: p }) if p == port);
+    let test_fire_light = if trigger_port.is_some() { None } else { args.test_fire };
     if let Some(spec) = &d.light {
-        if let Err(why) = probe_light(spec) {
+        if let Err(why) = probe_light(spec, test_fire_light) {
             failed.push(Failed { device: "light", why });
         }
     }
-    // A box named as both light and trigger answers once.
-    let probed_as_light =
-        |port: &str| matches!(&d.light, Some(LightSpec::Trigger { port: p }) if p == port);
-    if let Some(port) =
-        d.trigger.as_ref().and_then(TriggerSpec::port).filter(|p| !probed_as_light(p))
-    {
-        if let Err(why) = with_runtime(probe_trigger_box(port)) {
+    if let Some(port) = trigger_port {
+        let test_fire = args.test_fire;
+        let probe = if probed_as_light(port) && test_fire.is_none() {
+            Ok(())
+        } else {
+            with_runtime(probe_trigger_box(port, test_fire, !probed_as_light(port)))
+        };
+        if let Err(why) = probe {
             failed.push(Failed { device: "trigger", why });
         }
     }
@@ -110,10 +130,10 @@ fn with_runtime(
     rt.block_on(probe)
 }
 
-fn probe_light(spec: &LightSpec) -> Result<(), String> {
+fn probe_light(spec: &LightSpec, test_fire: Option<u32>) -> Result<(), String> {
     match spec {
         LightSpec::Dmx { port, .. } => with_runtime(probe_widget_on(port, spec)),
-        LightSpec::Trigger { port } => with_runtime(probe_trigger_box(port)),
+        LightSpec::Trigger { port } => with_runtime(probe_trigger_box(port, test_fire, true)),
         LightSpec::Sim | LightSpec::None => {
             outln!("light {spec}: nothing to probe (not a serial device)");
             Ok(())
@@ -139,22 +159,117 @@ async fn probe_widget_on(port: &str, spec: &LightSpec) -> Result<(), String> {
     Ok(())
 }
 
-/// The trigger box: its inputs, and how well its clock is known.
-async fn probe_trigger_box(port: &str) -> Result<(), String> {
-    let mut tb = TriggerBox::open(port, TriggerBoxConfig::default(), MonotonicClock::new())
+/// The trigger box: its firmware, protocol and inputs (`describe`: printed, once per box), how
+/// well its clock is known, and `test_fire` camera pulses.
+async fn probe_trigger_box(
+    port: &str,
+    test_fire: Option<u32>,
+    describe: bool,
+) -> Result<(), String> {
+    let clock = MonotonicClock::new();
+    let mut tb = TriggerBox::open(port, TriggerBoxConfig::default(), clock)
         .await
         .map_err(|e| e.to_string())?;
-    // `open` has already seen the ping's acknowledgement and a first input report.
+    // `open` has seen the ping's answer, the version and a first input report.
     let inputs = tb.read().map_err(|e| e.to_string())?;
-    outln!(
-        "trigger box trigger:{port}: answered the ping; e-stop {}, door {}",
-        if inputs.estop_pressed { "PRESSED" } else { "released" },
-        if inputs.door_open { "OPEN" } else { "closed" }
-    );
-    if let Some(u) = tb.clock_uncertainty_ns() {
-        outln!("  clock offset known to {:.0} us", u as f64 / 1e3);
+    if describe {
+        let version = tb.version().map_or_else(
+            || "version unknown".to_string(),
+            |v| format!("firmware {}, protocol {}", v.firmware, v.protocol),
+        );
+        outln!(
+            "trigger box trigger:{port}: {version}; e-stop {}, door {}",
+            if inputs.estop_pressed { "PRESSED" } else { "released" },
+            if inputs.door_open { "OPEN" } else { "closed" }
+        );
+        if let (Some(m), Some(u)) = (tb.clock_mapping(), tb.clock_uncertainty_ns()) {
+            outln!(
+                "  clock: mapped onto the host's over {} round trip(s), to +-{:.0} us",
+                m.samples,
+                u as f64 / 1e3
+            );
+        }
     }
-    Ok(())
+    let Some(n) = test_fire else { return Ok(()) };
+    test_fires(&mut tb, port, n, clock).await
+}
+
+/// Fire the camera line `n` times, 20 ms apart (the pulse is 1 ms), each after the previous one's
+/// answer; print each pulse's time on both clocks and the round trip, then their spread.
+async fn test_fires(
+    tb: &mut TriggerBox,
+    port: &str,
+    n: u32,
+    clock: MonotonicClock,
+) -> Result<(), String> {
+    const CAMERA: TriggerLines = TriggerLines { camera: true, light: false };
+    outln!("  test fire: {n} camera pulse(s), 20 ms apart");
+    let mut round_trips_ms = Vec::with_capacity(n as usize);
+    for i in 1..=u64::from(n) {
+        let asked = clock.now_ns();
+        tb.fire(i, CAMERA).map_err(|e| format!("test fire {i}: {e}"))?;
+        let deadline = asked + 200_000_000;
+        let report = loop {
+            match tb.poll_fired() {
+                Ok(Some(r)) => break Some(r),
+                Ok(None) if clock.now_ns() < deadline => {
+                    tokio::time::sleep(std::time::Duration::from_micros(200)).await;
+                }
+                Ok(None) => break None,
+                Err(e) => {
+                    errln!("  fire {i}: {e}");
+                    break None;
+                }
+            }
+        };
+        let Some(r) = report else { break };
+        let rtt_ms = r.acked_ns.saturating_sub(asked) as f64 / 1e6;
+        round_trips_ms.push(rtt_ms);
+        let host = match (r.host_ns, r.host_error_ns) {
+            (Some(h), Some(e)) => {
+                format!("host {:.6} s +- {:.0} us", h as f64 / 1e9, e as f64 / 1e3)
+            }
+            _ => "host time unknown (the box's clock is not mapped)".to_string(),
+        };
+        outln!("  fire {i}: box {} us, {host}, answered in {rtt_ms:.2} ms", r.device_us);
+        tokio::time::sleep_until(
+            tokio::time::Instant::now() + std::time::Duration::from_millis(20),
+        )
+        .await;
+    }
+    let busy = tb.busy();
+    if busy.answers > 0 {
+        outln!(
+            "  busy answers {} (sent again {}, given up {})",
+            busy.answers,
+            busy.retried,
+            busy.given_up
+        );
+    }
+    let answered = round_trips_ms.len();
+    let mut sorted = round_trips_ms.clone();
+    sorted.sort_by(f64::total_cmp);
+    let pct = |p: f64| {
+        let i = ((p / 100.0) * (sorted.len() as f64 - 1.0)).round() as usize;
+        sorted.get(i).copied().unwrap_or(f64::NAN)
+    };
+    if answered > 0 {
+        outln!(
+            "  test fire: {answered} of {n} answered; round trip (fire to answer) p50 {:.2} ms, \
+             p99 {:.2} ms, max {:.2} ms",
+            pct(50.0),
+            pct(99.0),
+            sorted.last().copied().unwrap_or(f64::NAN)
+        );
+    }
+    if answered == n as usize {
+        Ok(())
+    } else {
+        Err(format!(
+            "trigger box on {port}: {answered} of {n} test fires answered{}",
+            tb.fault().map(|f| format!(" ({})", f.message())).unwrap_or_default()
+        ))
+    }
 }
 
 fn probe_arm(host: &str) -> Result<(), String> {

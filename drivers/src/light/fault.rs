@@ -38,10 +38,15 @@ pub enum Fault {
     QueueFull,
     /// The driver's I/O task ended (runtime shut down).
     TaskEnded,
+    /// The trigger box sent its start banner after it was opened: it restarted, and its clock,
+    /// light and the answers in flight are gone.
+    BoxRestarted,
+    /// The trigger box speaks another protocol version than the driver (or does not know `V`).
+    WrongProtocol,
 }
 
 impl Fault {
-    const ALL: [Fault; 11] = [
+    const ALL: [Fault; 13] = [
         Fault::Unplugged,
         Fault::WriteTimeout,
         Fault::Io,
@@ -53,6 +58,8 @@ impl Fault {
         Fault::BoxError,
         Fault::QueueFull,
         Fault::TaskEnded,
+        Fault::BoxRestarted,
+        Fault::WrongProtocol,
     ];
 
     /// The HAL error kind the safety code sees.
@@ -60,8 +67,12 @@ impl Fault {
         match self {
             Fault::Unplugged | Fault::TaskEnded => ErrorKind::Disconnected,
             Fault::WriteTimeout | Fault::AckTimeout | Fault::InputsStale => ErrorKind::Timeout,
-            Fault::Garbage | Fault::LineTooLong | Fault::UnexpectedAck => ErrorKind::Protocol,
-            Fault::Io | Fault::BoxError | Fault::QueueFull => ErrorKind::DeviceFault,
+            Fault::Garbage | Fault::LineTooLong | Fault::UnexpectedAck | Fault::WrongProtocol => {
+                ErrorKind::Protocol
+            }
+            Fault::Io | Fault::BoxError | Fault::QueueFull | Fault::BoxRestarted => {
+                ErrorKind::DeviceFault
+            }
         }
     }
 
@@ -79,6 +90,14 @@ impl Fault {
             Fault::BoxError => "trigger box reported an error",
             Fault::QueueFull => "command queue to the serial device is full",
             Fault::TaskEnded => "serial I/O task has ended",
+            Fault::BoxRestarted => {
+                "trigger box restarted (its start banner came after it was opened): its clock, \
+                 light and the answers in flight are gone"
+            }
+            Fault::WrongProtocol => {
+                "trigger box speaks another protocol version than this driver (2); flash \
+                 firmware/trigger-box (docs/trigger-box.md)"
+            }
         }
     }
 

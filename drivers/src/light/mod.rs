@@ -5,7 +5,7 @@
 //!   [`enttec::probe_widget`] for commissioning;
 //! - [`trigger_box`]: the project's microcontroller trigger box ([`TriggerBox`]: camera trigger
 //!   and light strobe lines, light level, e-stop and door inputs), protocol in [`protocol`] and
-//!   docs/trigger-box-protocol.md;
+//!   docs/trigger-box-protocol.md, and the box's clock on the host's in [`clock_map`];
 //! - [`spec`]: the `--light sim|dmx:DEV|trigger:DEV|none` choice ([`LightSpec`]) and the registry
 //!   that opens a serial light as trait objects ([`OpenedLight`]): a new kind of light is its
 //!   driver file plus its arms in `spec.rs`;
@@ -16,6 +16,7 @@
 //! runtime, kept for the whole run). Each driver implements [`hitl_hal::Lifecycle`]: `health`
 //! from the tick, `stop` after the loop. See docs/lights.md and docs/devices.md.
 
+pub mod clock_map;
 pub mod dmx;
 pub mod enttec;
 pub mod fault;
@@ -29,7 +30,7 @@ pub use fault::{Fault, SerialError};
 pub use spec::{
     InputsDriver, LightDriver, LightSpec, OpenedLight, OpenedTrigger, TriggerDriver, TriggerSpec,
 };
-pub use trigger_box::{TriggerBox, TriggerBoxConfig};
+pub use trigger_box::{BoxVersion, BusyCounts, TriggerBox, TriggerBoxConfig};
 
 #[cfg(test)]
 mod tests {

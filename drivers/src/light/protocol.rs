@@ -1,5 +1,7 @@
-//! The trigger box's line protocol (docs/trigger-box-protocol.md): formatting host commands into
-//! fixed buffers and parsing the box's lines. Pure functions over bytes, no I/O, no allocation.
+//! The trigger box's line protocol, version 2 (docs/trigger-box-protocol.md): formatting host
+//! commands into fixed buffers and parsing the box's lines (answers, input reports, the `V`
+//! answer and `#` notices with the start banner). Pure functions over bytes, no I/O, no
+//! allocation.
 
 use core::fmt::Write as _;
 
@@ -7,6 +9,8 @@ use hitl_hal::TriggerLines;
 
 /// Longest line either side may send, terminator included.
 pub const MAX_LINE: usize = 64;
+/// The protocol version this codec speaks (the `V` answer's `protocol`).
+pub const PROTOCOL_VERSION: u16 = 2;
 /// Bit of the camera trigger line in a fire mask.
 pub const LINE_CAMERA: u8 = 1;
 /// Bit of the light strobe line in a fire mask.
@@ -23,6 +27,69 @@ pub enum Command {
     Level { permille: u16 },
     /// `S <seq> <permille> <duration_us>`: one light flash.
     Strobe { permille: u16, duration_us: u32 },
+    /// `V <seq>`: which protocol and firmware? (answered by a `V` line, not an `A`)
+    Version,
+}
+
+/// A firmware version, `MAJOR.MINOR.PATCH`.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, PartialOrd, Ord, Default)]
+pub struct FirmwareVersion {
+    pub major: u16,
+    pub minor: u16,
+    pub patch: u16,
+}
+
+impl core::fmt::Display for FirmwareVersion {
+    fn fmt(&self, f: &mut core::fmt::Formatter<'_>) -> core::fmt::Result {
+        write!(f, "{}.{}.{}", self.major, self.minor, self.patch)
+    }
+}
+
+/// Why the box last restarted, as its banner says (`reset=<cause>`).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum ResetCause {
+    Power,
+    External,
+    Brownout,
+    Watchdog,
+    /// `unknown` (a bootloader cleared the flags), or a word this codec does not know.
+    Unknown,
+}
+
+impl ResetCause {
+    pub fn as_str(self) -> &'static str {
+        match self {
+            ResetCause::Power => "power",
+            ResetCause::External => "external",
+            ResetCause::Brownout => "brownout",
+            ResetCause::Watchdog => "watchdog",
+            ResetCause::Unknown => "unknown",
+        }
+    }
+
+    fn parse(word: &str) -> Self {
+        match word {
+            "power" => ResetCause::Power,
+            "external" => ResetCause::External,
+            "brownout" => ResetCause::Brownout,
+            "watchdog" => ResetCause::Watchdog,
+            _ => ResetCause::Unknown,
+        }
+    }
+}
+
+/// A `#` line: for people reading the port; the host acts only on the two it knows.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Notice {
+    /// `# hitl-trigger-box <firmware> protocol <protocol> reset=<cause>`: the box has just
+    /// started (its first line after every reset). `firmware`/`protocol` are `None` when the
+    /// banner's fields do not parse (it still says the box restarted).
+    Banner { firmware: Option<FirmwareVersion>, protocol: Option<u16>, reset: ResetCause },
+    /// `# safe host-silent`: the box went to its fail-safe (camera low, light off) after a
+    /// second without a command.
+    HostSilent,
+    /// Any other `#` line.
+    Other,
 }
 
 /// A line from the box.
@@ -34,7 +101,20 @@ pub enum BoxLine {
     Inputs { device_us: u64, estop_pressed: bool, door_open: bool },
     /// `E <seq> <code>`: command `seq` (0: none) failed with `code`.
     Error { seq: u32, code: u16 },
+    /// `V <seq> <device_us> <protocol> <firmware>`: the answer to `V <seq>`, done at
+    /// `device_us` (answers its `seq` like an `A`).
+    Version { seq: u32, device_us: u64, protocol: u16, firmware: FirmwareVersion },
+    /// `# <text>`: a notice (ignored by the protocol, but the banner means the box restarted).
+    Notice(Notice),
 }
+
+/// `E` code: bad syntax or an over-long line.
+pub const ERR_SYNTAX: u16 = 1;
+/// `E` code: unknown command (a protocol-1 box answers `V` with it).
+pub const ERR_UNKNOWN: u16 = 2;
+/// `E` code: busy (a line asked for is still high, or the box's command queue is full; `seq` 0).
+/// Never a fault: the command is retried.
+pub const ERR_BUSY: u16 = 3;
 
 /// Why a line from the box was rejected.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -70,8 +150,45 @@ pub fn format_command(seq: u32, cmd: Command) -> heapless::String<MAX_LINE> {
         Command::Strobe { permille, duration_us } => {
             writeln!(s, "S {seq} {permille} {duration_us}")
         }
+        Command::Version => writeln!(s, "V {seq}"),
     };
     s
+}
+
+/// `MAJOR.MINOR.PATCH`, each a decimal u16.
+fn firmware_version(f: Option<&str>) -> Result<FirmwareVersion, ParseError> {
+    let f = f.ok_or(ParseError::MissingField)?;
+    let mut parts = f.split('.');
+    let mut next = || field::<u16>(Some(parts.next().ok_or(ParseError::BadField)?));
+    let v = FirmwareVersion { major: next()?, minor: next()?, patch: next()? };
+    if parts.next().is_some() {
+        return Err(ParseError::BadField);
+    }
+    Ok(v)
+}
+
+/// A `#` line's meaning (its bytes already checked).
+fn notice(text: &str) -> Notice {
+    let body = text.trim_start_matches('#').trim_start_matches(' ');
+    if body == "safe host-silent" {
+        return Notice::HostSilent;
+    }
+    let Some(rest) = body.strip_prefix("hitl-trigger-box") else { return Notice::Other };
+    if !(rest.is_empty() || rest.starts_with(' ')) {
+        return Notice::Other;
+    }
+    let words: heapless::Vec<&str, 8> = rest.split(' ').filter(|w| !w.is_empty()).take(8).collect();
+    let firmware = words.first().and_then(|w| firmware_version(Some(w)).ok());
+    let protocol = words
+        .iter()
+        .position(|w| *w == "protocol")
+        .and_then(|i| words.get(i + 1))
+        .and_then(|w| field::<u16>(Some(w)).ok());
+    let reset = words
+        .iter()
+        .find_map(|w| w.strip_prefix("reset="))
+        .map_or(ResetCause::Unknown, ResetCause::parse);
+    Notice::Banner { firmware, protocol, reset }
 }
 
 fn field<T: core::str::FromStr>(f: Option<&str>) -> Result<T, ParseError> {
@@ -100,6 +217,9 @@ pub fn parse_line(line: &[u8]) -> Result<BoxLine, ParseError> {
         return Err(ParseError::NotAscii);
     }
     let text = core::str::from_utf8(line).map_err(|_| ParseError::NotAscii)?;
+    if text.starts_with('#') {
+        return Ok(BoxLine::Notice(notice(text)));
+    }
     let mut parts = text.split(' ');
     let parsed = match parts.next() {
         Some("A") => BoxLine::Ack { seq: field(parts.next())?, device_us: field(parts.next())? },
@@ -109,6 +229,12 @@ pub fn parse_line(line: &[u8]) -> Result<BoxLine, ParseError> {
             door_open: flag(parts.next())?,
         },
         Some("E") => BoxLine::Error { seq: field(parts.next())?, code: field(parts.next())? },
+        Some("V") => BoxLine::Version {
+            seq: field(parts.next())?,
+            device_us: field(parts.next())?,
+            protocol: field(parts.next())?,
+            firmware: firmware_version(parts.next())?,
+        },
         _ => return Err(ParseError::UnknownType),
     };
     if parts.next().is_some() {
@@ -179,6 +305,56 @@ mod tests {
         let big =
             Command::Fire { tick: u64::MAX, lines: TriggerLines { camera: true, light: false } };
         assert_eq!(format_command(u32::MAX, big).as_str(), "F 4294967295 18446744073709551615 1\n");
+        assert_eq!(format_command(9, Command::Version).as_str(), "V 9\n");
+    }
+
+    #[test]
+    fn version_answers_parse() {
+        let v = FirmwareVersion { major: 0, minor: 1, patch: 0 };
+        assert_eq!(
+            parse_line(b"V 2 310551 2 0.1.0"),
+            Ok(BoxLine::Version { seq: 2, device_us: 310_551, protocol: 2, firmware: v })
+        );
+        assert_eq!(v.to_string(), "0.1.0");
+        assert_eq!(parse_line(b"V 2 310551 2"), Err(ParseError::MissingField));
+        assert_eq!(parse_line(b"V 2 310551 2 0.1"), Err(ParseError::BadField));
+        assert_eq!(parse_line(b"V 2 310551 2 0.1.0.4"), Err(ParseError::BadField));
+        assert_eq!(parse_line(b"V 2 310551 2 0.x.0"), Err(ParseError::BadField));
+        assert_eq!(parse_line(b"V 2 310551 2 0.1.0 x"), Err(ParseError::ExtraField));
+    }
+
+    #[test]
+    fn notices_parse_and_the_banner_says_why_the_box_restarted() {
+        let fw = Some(FirmwareVersion { major: 0, minor: 1, patch: 0 });
+        assert_eq!(
+            parse_line(b"# hitl-trigger-box 0.1.0 protocol 2 reset=watchdog\r"),
+            Ok(BoxLine::Notice(Notice::Banner {
+                firmware: fw,
+                protocol: Some(2),
+                reset: ResetCause::Watchdog
+            }))
+        );
+        // A banner whose fields do not parse still says the box restarted.
+        assert_eq!(
+            parse_line(b"# hitl-trigger-box ? reset=brown"),
+            Ok(BoxLine::Notice(Notice::Banner {
+                firmware: None,
+                protocol: None,
+                reset: ResetCause::Unknown
+            }))
+        );
+        assert_eq!(parse_line(b"# safe host-silent"), Ok(BoxLine::Notice(Notice::HostSilent)));
+        assert_eq!(parse_line(b"# anything else"), Ok(BoxLine::Notice(Notice::Other)));
+        assert_eq!(parse_line(b"#"), Ok(BoxLine::Notice(Notice::Other)));
+        assert_eq!(parse_line(b"# hitl-trigger-boxes"), Ok(BoxLine::Notice(Notice::Other)));
+        // Still length- and ASCII-checked like every line.
+        assert_eq!(parse_line(b"# caf\xc3\xa9"), Err(ParseError::NotAscii));
+        let mut lb = LineBuffer::new();
+        let mut long = false;
+        for &b in [b'#'; 80].iter().chain(b"\n") {
+            long |= lb.push(b) == Pushed::TooLong;
+        }
+        assert!(long, "a 80-byte notice is over-long");
     }
 
     #[test]
@@ -243,6 +419,12 @@ mod tests {
             );
             let err = format!("E {seq} {code}{end}");
             proptest::prop_assert_eq!(parse_line(err.as_bytes()), Ok(BoxLine::Error { seq, code }));
+            let firmware = FirmwareVersion { major: code, minor: code / 7, patch: u16::from(crlf) };
+            let v = format!("V {seq} {us} {code} {firmware}{end}");
+            proptest::prop_assert_eq!(
+                parse_line(v.as_bytes()),
+                Ok(BoxLine::Version { seq, device_us: us, protocol: code, firmware })
+            );
         }
 
         /// Any byte stream through the line buffer: lines never longer than MAX_LINE, and
