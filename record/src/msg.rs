@@ -114,7 +114,8 @@ pub struct LightMsg {
 }
 
 /// `/trigger/fired`: a trigger-line fire the trigger box acknowledged, with the time it says it
-/// fired on its own clock (the exposure's start for a hardware-triggered camera).
+/// fired on its own clock (the exposure's start for a hardware-triggered camera) and that time on
+/// the host's clock.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
 pub struct TriggerFiredMsg {
     /// Host monotonic time the acknowledgement arrived, nanoseconds.
@@ -123,6 +124,13 @@ pub struct TriggerFiredMsg {
     pub tick: u64,
     /// When the box fired, on its clock, microseconds.
     pub device_us: u64,
+    /// When the box fired on the host's monotonic clock, nanoseconds: `device_us` through the
+    /// driver's clock mapping (absent in recordings made before it, or before a mapping existed).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub fired_ns: Option<u64>,
+    /// A bound on `fired_ns`'s error, nanoseconds.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub clock_error_ns: Option<u64>,
 }
 
 /// What happened, in the words of the safety case. Written as kebab-case strings.
@@ -349,6 +357,18 @@ pub fn metres_to_mm(m: f32) -> u16 {
 mod tests {
     use super::*;
     use nalgebra::Vector3;
+
+    #[test]
+    fn trigger_fired_reads_recordings_without_the_host_time() {
+        let old: TriggerFiredMsg =
+            serde_json::from_str(r#"{"t_ns":9,"tick":3,"device_us":7}"#).expect("old message");
+        assert_eq!((old.fired_ns, old.clock_error_ns), (None, None));
+        let new = TriggerFiredMsg { fired_ns: Some(8), clock_error_ns: Some(2), ..old };
+        let text = serde_json::to_string(&new).expect("json");
+        assert!(text.contains(r#""fired_ns":8,"clock_error_ns":2"#), "{text}");
+        assert_eq!(serde_json::from_str::<TriggerFiredMsg>(&text).expect("back"), new);
+        assert!(!serde_json::to_string(&old).expect("json").contains("fired_ns"));
+    }
 
     #[test]
     fn camera_in_target_frame() {

@@ -67,7 +67,7 @@ pub(crate) fn json_schema(topic: &str) -> Option<(&'static str, String)> {
         ),
         TRIGGER_FIRED => (
             "hitl.TriggerFired",
-            r#"{"type":"object","properties":{"t_ns":{"type":"integer"},"tick":{"type":"integer"},"device_us":{"type":"integer"}},"required":["t_ns","tick","device_us"]}"#.to_string(),
+            r#"{"type":"object","properties":{"t_ns":{"type":"integer"},"tick":{"type":"integer"},"device_us":{"type":"integer"},"fired_ns":{"type":"integer"},"clock_error_ns":{"type":"integer"}},"required":["t_ns","tick","device_us"]}"#.to_string(),
         ),
         RECORDER_STATS => (
             "hitl.RecorderStats",

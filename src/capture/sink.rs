@@ -8,7 +8,7 @@ use crate::control::interlocks::{Trip, TripKind};
 use crate::control::setpoint::Phase;
 use crate::control::telemetry::{CaptureOut, SetpointOut, TelemetrySink, TimingOut};
 use crossbeam::queue::ArrayQueue;
-use hitl_hal::{ArmState, FireReport, RgbdFrame};
+use hitl_hal::{ArmState, FireReport, RgbdFrame, Trigger};
 use hitl_record::{
     ArmStateMsg, EventKind, LightMsg, Phase as RecPhase, SafetyEventMsg, SetpointMsg, Telemetry,
     TimingMsg, TriggerFiredMsg,
@@ -97,6 +97,18 @@ fn trip_event(trip: &Trip) -> SafetyEventMsg {
     SafetyEventMsg::numeric(trip.t_ns, kind, trip.tick, joint, value, limit)
 }
 
+impl RunTelemetry {
+    /// After the loop, once the devices have stopped (the trigger box's stop waits for the
+    /// answers to what it sent): the fires answered after the loop's last tick, recorded like the
+    /// others. The last capture's pulse is answered a few milliseconds after its tick, which may
+    /// be the run's last.
+    pub fn record_late_fires<T: Trigger + ?Sized>(&self, trigger: &mut T) {
+        while let Ok(Some(fired)) = trigger.poll_fired() {
+            self.fired(&fired);
+        }
+    }
+}
+
 impl TelemetrySink for RunTelemetry {
     fn setpoint(&self, m: &SetpointOut) {
         if let Some(r) = &self.record {
@@ -141,6 +153,8 @@ impl TelemetrySink for RunTelemetry {
                 t_ns: f.acked_ns,
                 tick: f.tick,
                 device_us: f.device_us,
+                fired_ns: f.host_ns,
+                clock_error_ns: f.host_error_ns,
             });
         }
     }

@@ -203,6 +203,24 @@ pub fn check_trigger_wiring(
     }
 }
 
+/// Whether `camera` is fired by the trigger box's camera line with the devices chosen (a
+/// hardware-triggered Orbbec camera, which [`check_trigger_wiring`] has given a box): its frames'
+/// exposure is the box's pulse (`super::pulse`). `orbbec` (auto) counts: hardware triggering is
+/// its choice on every supported model (a camera whose firmware does not offer it falls back to
+/// software triggering, and its frames would then carry the pulse's time although the SDK
+/// triggered them: docs/devices.md).
+pub fn pulse_triggered(camera: CameraSpec, light: &LightSpec, trigger: &TriggerSpec) -> bool {
+    let has_box = trigger.port().is_some() || matches!(light, LightSpec::Trigger { .. });
+    has_box
+        && matches!(
+            camera,
+            CameraSpec::Orbbec(OrbbecSpec {
+                trigger: TriggerChoice::Hardware | TriggerChoice::Auto,
+                ..
+            })
+        )
+}
+
 /// Open the Orbbec camera `o` names, saying what it held when that needs saying (a crashed run's
 /// configuration, a camera left waiting for triggers). Several cameras and none named is bad
 /// input (exit 2, listing them); no camera, or none with that serial, is a device failure.

@@ -11,6 +11,7 @@
 //! - [`inputs`]: every safety-input source of the run, read together;
 //! - [`any`]: the trait objects and adapters that give the loop one type per role;
 //! - [`none`]: the deliberately absent devices;
+//! - [`pulse`]: a hardware-triggered camera's exposure at the trigger box's pulse;
 //! - [`stub`]: the embedded MuJoCo stub (SITL) a run without `--arm` plays on.
 
 pub mod any;
@@ -19,6 +20,7 @@ pub mod camera;
 pub mod inputs;
 pub mod light;
 pub mod none;
+pub mod pulse;
 #[cfg(feature = "stub")]
 pub mod stub;
 pub mod trigger;
@@ -129,7 +131,17 @@ pub fn open_devices(
     camera::check_trigger_wiring(choice.camera, &choice.light, &choice.trigger)?;
     let mut opened = light::open_light(&choice.light, ctx)?;
     trigger::open_trigger(&choice.trigger, &choice.light, &mut opened, ctx)?;
-    let camera = camera::open_camera(choice.camera, &choice.stream, ctx)?;
+    let mut camera = camera::open_camera(choice.camera, &choice.stream, ctx)?;
+    if camera::pulse_triggered(choice.camera, &choice.light, &choice.trigger) {
+        // The camera exposes at the box's pulse: its frames take that time (mapped onto the
+        // host's clock) as their exposure.
+        let times = pulse::FireTimes::new();
+        let trigger =
+            std::mem::replace(&mut opened.trigger.dev, Box::new(any::Kinds::new(none::NoTrigger)));
+        opened.trigger.dev = Box::new(pulse::RecordFires { inner: trigger, times: times.clone() });
+        let cam = std::mem::replace(&mut camera.dev, Box::new(any::Kinds::new(none::NoCamera)));
+        camera.dev = Box::new(pulse::PulseExposure { inner: cam, times });
+    }
     #[cfg_attr(not(feature = "stub"), allow(unused_mut))]
     let mut inputs = opened.inputs;
     #[cfg(feature = "stub")]

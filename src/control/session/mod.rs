@@ -832,13 +832,17 @@ fn play(
 }
 
 /// After the loop: hand the frames still on their way to the intake, stop every device (a last
-/// light frame, the trigger box's queue written, ports closed), and say which devices failed.
+/// light frame, the trigger box's queue written and answered, ports closed), record the fires
+/// answered after the last tick, and say which devices failed.
 fn close_devices(devices: &mut RunDevices, capture: &CapturePath, captures: u64) -> Vec<String> {
     collect_late_frames(&mut devices.camera, &capture.queues, captures);
     let faults = devices.faults();
     for failed in devices.stop() {
         crate::errln!("note: {failed}");
     }
+    let telemetry =
+        RunTelemetry { record: capture.record.clone(), intake: Arc::clone(&capture.queues) };
+    telemetry.record_late_fires(&mut devices.trigger);
     faults
 }
 
