@@ -1,6 +1,7 @@
 # hitl: two commands on a fresh Linux machine with the Rust toolchain, Python 3 and pip.
 #   make demo   set up, then run a stub campaign: play a preset trajectory, record it, report it
-#   make test   set up, then run every test (Rust, Python peers), fmt and clippy
+#   make test   set up, build the trigger box's firmware and box-sim, then run every test (Rust,
+#               Python peers, the firmware in box-sim through hitl), fmt and clippy
 #   make firmware / firmware-check   the trigger box's firmware and box-sim (docs/trigger-box.md)
 SHELL := /bin/bash
 CARGO ?= cargo
@@ -19,7 +20,8 @@ demo: setup
 	$(CARGO) build --release
 	@bash scripts/demo.sh
 
-test: setup test-rust lint
+# The trigger box's firmware and box-sim first: tests/trigger_box_sim.rs runs `hitl` against them.
+test: setup firmware test-rust lint
 
 test-rust:
 	$(CARGO) test --workspace --all-targets --no-fail-fast
