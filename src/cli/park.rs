@@ -70,6 +70,8 @@ pub fn run(args: ParkArgs) -> u8 {
         trigger: args.devices.trigger.clone().unwrap_or(TriggerSpec::None),
         perception: BackendSpec::None,
         reregister: ReregisterPolicy::default(),
+        mask: crate::capture::mask::MaskSource::None,
+        mask_margin_px: 0,
         camera_preset: "orbbec".into(),
         camera_size: None,
         target_model: "asymmetric".into(),
