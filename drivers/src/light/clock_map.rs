@@ -65,6 +65,22 @@ impl Sample {
         Some(Self { device_ns: device_us.saturating_mul(1000), host_lo_ns: lo, host_hi_ns: hi })
     }
 
+    /// An estimate of this sample's stamp on the host's clock (`host_ns`, within `error_ns`, from
+    /// the fit) held to the sample's own interval, where the stamp must be: the fit's estimate
+    /// where it falls inside (its bound no wider than the interval allows), else the nearest end
+    /// of the interval, known to the interval's width. (A clock that is not a straight line over
+    /// the fit's window, which box-sim's is not when it falls behind the wall clock, can put the
+    /// line outside; a real box's oscillator does not.)
+    pub fn hold(&self, host_ns: u64, error_ns: u64) -> (u64, u64) {
+        let held = host_ns.clamp(self.host_lo_ns, self.host_hi_ns);
+        let own = (held - self.host_lo_ns).max(self.host_hi_ns - held);
+        if held == host_ns {
+            (held, error_ns.min(own))
+        } else {
+            (held, own)
+        }
+    }
+
     fn mid(&self) -> f64 {
         (self.host_lo_ns as f64 + self.host_hi_ns as f64) / 2.0
     }
@@ -347,6 +363,17 @@ mod tests {
         let s = Sample::new(1, 1_000, 5, 2_000, 13, 86_806).unwrap();
         assert_eq!((s.host_lo_ns, s.host_hi_ns), (1_000, 2_000));
         assert!(Sample::new(1, 2_000, 5, 1_000, 13, 0).is_none());
+    }
+
+    #[test]
+    fn an_estimate_is_held_to_its_own_round_trip() {
+        let s = Sample { device_ns: 0, host_lo_ns: 1_000, host_hi_ns: 3_000 };
+        // Inside: the fit's estimate, its bound no wider than the interval allows.
+        assert_eq!(s.hold(1_500, 100), (1_500, 100));
+        assert_eq!(s.hold(1_500, 5_000), (1_500, 1_500));
+        // Outside: the nearest end, known to the interval's width.
+        assert_eq!(s.hold(3_700, 50), (3_000, 2_000));
+        assert_eq!(s.hold(10, 50), (1_000, 2_000));
     }
 
     #[test]

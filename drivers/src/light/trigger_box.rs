@@ -641,7 +641,8 @@ impl BoxTask {
     /// An `A` or `V` for `p`: a clock sample, and what the command was for.
     fn answer(&mut self, p: &Pending, device_us: u64, now: u64, answer_bytes: usize) {
         let byte_ns = self.byte_ns();
-        if let Some(s) = Sample::new(device_us, p.sent_ns, p.bytes, now, answer_bytes, byte_ns) {
+        let sample = Sample::new(device_us, p.sent_ns, p.bytes, now, answer_bytes, byte_ns);
+        if let Some(s) = sample {
             if let Some(m) = self.clock.add(s) {
                 self.shared.mapping.store(&m);
             }
@@ -651,12 +652,22 @@ impl BoxTask {
             self.shared.open_progress.notify_one();
         }
         if let Command::Fire { tick, .. } = p.cmd {
+            // The fit's time for the pulse, held to the fire's own round trip.
+            let fitted = self
+                .clock
+                .mapping()
+                .map(|m| m.host_ns(device_us))
+                .zip(self.clock.error_ns(device_us));
+            let host = match (fitted, sample) {
+                (Some((h, e)), Some(s)) => Some(s.hold(h, e)),
+                (fitted, _) => fitted,
+            };
             let report = FireReport {
                 tick,
                 device_us,
                 acked_ns: now,
-                host_ns: self.clock.mapping().map(|m| m.host_ns(device_us)),
-                host_error_ns: self.clock.error_ns(device_us),
+                host_ns: host.map(|h| h.0),
+                host_error_ns: host.map(|h| h.1),
             };
             if self.shared.fired.force_push(report).is_some() {
                 self.shared.fired_dropped.fetch_add(1, Ordering::Relaxed);
