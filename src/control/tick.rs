@@ -60,6 +60,18 @@ impl Program {
     fn playback_end(&self) -> u64 {
         self.approach_ticks() + self.playback.len() as u64
     }
+
+    /// The light level in effect at tick `k` of the playback: the schedule's level there, whose
+    /// command went out `light_lead_ticks` earlier. `None` without a schedule, outside the
+    /// playback, and in the first `light_lead_ticks` ticks of the run (that command would have
+    /// had to go out before the loop started: the light shows whatever it had).
+    pub fn light_in_effect(&self, k: u64) -> Option<f32> {
+        if k < self.light_lead_ticks {
+            return None;
+        }
+        let i = k.checked_sub(self.approach_ticks())?;
+        self.light.get(usize::try_from(i).ok()?).copied()
+    }
 }
 
 /// Flags raised outside the loop that the tick reads each period (lock-free).
@@ -473,9 +485,36 @@ where
             fired_ns: now,
             index: self.captures,
             commanded: *commanded,
-            light_level: self.light_level,
+            // What the light shows at this exposure (its level went out a lead earlier).
+            light_level: p.light_in_effect(k).unwrap_or(f32::NAN),
         });
         self.captures += 1;
         self.status.captures.fetch_add(1, Ordering::Relaxed);
+    }
+}
+
+#[cfg(test)]
+mod light_lead_tests {
+    use super::*;
+
+    #[test]
+    fn a_capture_sees_the_scheduled_level_once_the_lead_has_passed() {
+        let p = Program {
+            approach: vec![Setpoint::rest([0.0; 7]); 3],
+            light: vec![0.2, 0.2, 0.6, 0.6, 1.0],
+            light_lead_ticks: 2,
+            ..Program::default()
+        };
+        // Playback tick i is loop tick 3 + i; its level went out at tick 1 + i.
+        assert_eq!(p.light_in_effect(3), Some(0.2));
+        assert_eq!(p.light_in_effect(5), Some(0.6));
+        assert_eq!(p.light_in_effect(7), Some(1.0));
+        assert_eq!(p.light_in_effect(8), None, "after the playback");
+        assert_eq!(p.light_in_effect(2), None, "in the approach");
+        // A lead longer than the approach: the first captures' levels were never sent in time.
+        let long = Program { light_lead_ticks: 4, ..p.clone() };
+        assert_eq!(long.light_in_effect(3), None);
+        assert_eq!(long.light_in_effect(4), Some(0.2));
+        assert_eq!(Program::default().light_in_effect(0), None, "no schedule");
     }
 }

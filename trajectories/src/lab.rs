@@ -135,11 +135,16 @@ pub struct LightPlacement {
     pub position_lab_m: [f64; 3],
     /// Keep-out sphere radius around the light and its Fresnel, metres. Default 0.2.
     pub keepout_radius_m: f64,
+    /// How much earlier than its scheduled tick a level change goes out, milliseconds: the
+    /// light path's latency, so that captures see the level the schedule gives them. Absent: the
+    /// light kind's default (DMX 25, trigger box 2, the stub's light 0; docs/lights.md).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub lead_ms: Option<f64>,
 }
 
 impl Default for LightPlacement {
     fn default() -> Self {
-        Self { position_lab_m: [2.2, 0.3, 0.9], keepout_radius_m: 0.2 }
+        Self { position_lab_m: [2.2, 0.3, 0.9], keepout_radius_m: 0.2, lead_ms: None }
     }
 }
 
@@ -528,6 +533,9 @@ impl LabConfig {
         if let Some(m) = self.target.model_size_m {
             rules.push(Rule::one("target.model_size_m", m, Positive));
         }
+        if let Some(lead) = self.light.lead_ms {
+            rules.push(Rule::one("light.lead_ms", lead, Within(0.0, 1000.0)));
+        }
         if let Some(b) = &self.board {
             rules.push(Rule::one("board.rows", b.rows as f64, Within(1.0, 64.0)));
             rules.push(Rule::one("board.cols", b.cols as f64, Within(1.0, 64.0)));
@@ -720,6 +728,7 @@ mod tests {
             ("[arm]\nbase_yaw_deg = -inf\n", "arm.base_yaw_deg = -inf"),
             ("[camera.body]\nradius_m = nan\n", "camera.body.radius_m = NaN"),
             ("[target]\nmodel_size_m = inf\n", "target.model_size_m = inf"),
+            ("[light]\nlead_ms = nan\n", "light.lead_ms = NaN"),
             ("[board]\nposition_target_m = [0, 0, nan]\n", "board.position_target_m[2] = NaN"),
             ("[calibration]\nview_rms_px = [0.1, nan]\n", "calibration.view_rms_px[1] = NaN"),
             ("[interlocks]\nmax_deviation_rad = nan\n", "interlocks.max_deviation_rad = NaN"),
@@ -743,6 +752,8 @@ mod tests {
             ("[enclosure]\nsize_m = [2, 0, 1]\n", "enclosure.size_m[1] = 0 must be positive"),
             ("[arm]\nrest_q = [0, -0.5, 0, -0.2, 0, 1.4, 0]\n", "arm.rest_q[3] = -0.2 must be in"),
             ("[arm]\nrest_q = [7, -0.5, 0, 0.9, 0, 1.4, 0]\n", "arm.rest_q[0] = 7 must be in"),
+            ("[light]\nlead_ms = -1\n", "light.lead_ms = -1 must be in [0, 1000]"),
+            ("[light]\nlead_ms = 1500\n", "light.lead_ms = 1500 must be in [0, 1000]"),
         ] {
             let e = LabConfig::from_toml(text).expect_err(text).to_string();
             assert!(e.contains(key), "{text}: {e}");
@@ -752,6 +763,9 @@ mod tests {
             "[target]\nrpy_deg = [-360, 360, 0]\n[interlocks]\nreply_stall_ms = 2000\n",
         )
         .expect("edges");
+        let c = LabConfig::from_toml("[light]\nlead_ms = 0\n").expect("no lead");
+        assert_eq!(c.light.lead_ms, Some(0.0));
+        assert_eq!(LabConfig::default().light.lead_ms, None, "the light kind's default");
     }
 
     #[test]

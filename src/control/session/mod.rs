@@ -131,6 +131,9 @@ pub struct RunRequest {
     /// `hitl park`: no trajectory (`trajectory` is not read); the only motion is the retreat from
     /// wherever the arm stands to the rest pose.
     pub park: bool,
+    /// SITL: where the embedded stub's arm powers up (`--stub-start-q`), e.g. where a previous
+    /// run left a real arm; `None`: the stub's own power-up pose.
+    pub stub_start_q: Option<Joints>,
     pub plain_progress: bool,
     /// Stream the run to Foxglove (`--live`; needs `record`: the recorder feeds it).
     pub live: Option<hitl_record::LiveConfig>,
@@ -312,6 +315,8 @@ pub fn run(req: RunRequest) -> Result<RunReport, RunError> {
     } else {
         build_program(&link.first.q, &table, &link.lab, retreat_to.as_ref())?
     };
+    let mut program = program;
+    program.light_lead_ticks = light_lead_ticks(&req, table.rate_hz);
     for m in &moves {
         crate::errln!("{}", m.describe());
         if let Some(t) = &capture.record {
@@ -429,6 +434,7 @@ fn start_arm_target(
                 scene.scale,
                 &look,
                 req.rt.fifo_priority,
+                req.stub_start_q,
             )?
             .with_depth_model(req.depth_model, 0);
             stub.sun_track()
@@ -681,6 +687,23 @@ fn connect_arm(
         first,
         lab: arm_lab,
     })
+}
+
+/// How many ticks early level changes go out: `[light] lead_ms`, else the light kind's default
+/// (docs/lights.md), said on stderr when not zero.
+fn light_lead_ticks(req: &RunRequest, rate_hz: f64) -> u64 {
+    let (lead_ms, from) = match req.lab.light.lead_ms {
+        Some(ms) => (ms, "[light] lead_ms"),
+        None => (run_devices::light::default_lead_ms(&req.light), "the light's default"),
+    };
+    let ticks = run_devices::light::lead_ticks(lead_ms, rate_hz);
+    if ticks > 0 {
+        crate::errln!(
+            "light {}: level changes go out {lead_ms} ms ({ticks} ticks) early ({from})",
+            req.light
+        );
+    }
+    ticks
 }
 
 /// The approach from `start`, then the trajectory with its captures and light schedule, then the
