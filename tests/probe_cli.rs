@@ -17,8 +17,9 @@ fn text(out: &std::process::Output) -> String {
     format!("{}{}", String::from_utf8_lossy(&out.stdout), String::from_utf8_lossy(&out.stderr))
 }
 
-/// `hitl stub` on free loopback ports; returns the child and its command port once it serves.
-fn start_stub() -> (Child, u16) {
+/// `hitl stub` on free loopback ports; returns the child, its command port and its real report
+/// port once it serves.
+fn start_stub() -> (Child, u16, u16) {
     let free = || {
         std::net::TcpListener::bind("127.0.0.1:0")
             .and_then(|l| l.local_addr())
@@ -47,13 +48,19 @@ fn start_stub() -> (Child, u16) {
     }
     // Keep draining its stderr so the stub never blocks on a full pipe.
     std::thread::spawn(move || for _ in lines {});
-    (child, cmd)
+    (child, cmd, report)
 }
 
 #[test]
 fn probe_prints_the_stub_arms_identity_and_table_and_moves_nothing() {
-    let (mut stub, port) = start_stub();
-    let out = hitl(&["probe", "--arm", &format!("127.0.0.1:{port}")]);
+    let (mut stub, port, report) = start_stub();
+    let out = hitl(&[
+        "probe",
+        "--arm",
+        &format!("127.0.0.1:{port}"),
+        "--report-port",
+        &report.to_string(),
+    ]);
     let _ = stub.kill();
     let _ = stub.wait();
     let all = text(&out);
@@ -62,6 +69,16 @@ fn probe_prints_the_stub_arms_identity_and_table_and_moves_nothing() {
     assert!(all.contains("joint-limit table xarm7-current"), "{all}");
     assert!(all.contains("J4 -0.1047..3.9270"), "{all}");
     assert!(all.contains("error code 0, warning code 0"), "{all}");
+    // The report ports a run also needs: the stub's arm at its power-up pose, in position mode.
+    assert!(
+        all.contains(&format!(
+            "report ports {report} (real, joints, state, mode) and {} (normal, codes): answered",
+            report - 2
+        )),
+        "{all}"
+    );
+    assert!(all.contains("mode 0 (position), error 0, warning 0"), "{all}");
+    assert!(all.contains("joints: J1 0.0000, J2 -0.5000, J3 0.0000, J4 0.9000"), "{all}");
     assert!(all.contains("every named device answered"), "{all}");
 }
 

@@ -14,9 +14,7 @@ use crate::exit;
 use crate::{errln, outln};
 use hitl_drivers::light::enttec::{probe_widget, Reply};
 use hitl_drivers::light::{TriggerBox, TriggerBoxConfig};
-use hitl_drivers::xarm::{ClientConfig, XarmClient};
-use hitl_hal::{Arm as _, Clock as _, Inputs as _, MonotonicClock, Trigger as _, TriggerLines};
-use hitl_trajectories::joint_table::JointTable;
+use hitl_hal::{Clock as _, Inputs as _, MonotonicClock, Trigger as _, TriggerLines};
 use std::time::Duration;
 
 /// Commission devices: list what is connected and check that each named device answers. The
@@ -27,10 +25,26 @@ pub struct ProbeArgs {
     pub devices: DeviceFlags,
     /// Fire the trigger box's camera line N times (20 ms apart) and print each pulse's time on
     /// the box's clock and on the host's, and the round trips (needs a box: --trigger or
-    /// --light trigger:DEV). Exit 5 unless every pulse was acknowledged.
+    /// --light trigger:DEV). Exit 5 unless every pulse was acknowledged. With --camera as well,
+    /// the N pulses fire the camera instead, 100 ms apart: the probe counts the frames that come
+    /// back, the misses, and how late each frame's timestamp is after the box's pulse (p50/p99);
+    /// exit 5 unless every pulse got its frame.
     #[arg(long, value_name = "N", value_parser = clap::value_parser!(u32).range(1..=10_000))]
     pub test_fire: Option<u32>,
+    /// The arm's real report port (a box's 30003); its normal report (error and warning codes)
+    /// is read two ports below, as on a box. Only with --arm.
+    #[arg(long, value_name = "P", default_value_t = 30003,
+          value_parser = clap::value_parser!(u16).range(3..))]
+    pub report_port: u16,
+    /// Step the light named by --light through 0, 0.25, 0.5, 0.75, 1 and back to 0, 400 ms
+    /// each, checking the driver after every step.
+    #[arg(long)]
+    pub test_levels: bool,
 }
+
+mod arm;
+mod camera;
+mod levels;
 
 /// One named device that did not answer.
 struct Failed {
@@ -48,19 +62,27 @@ pub fn run(args: ProbeArgs) -> u8 {
         );
         return exit::BAD_INPUT;
     }
+    if args.test_levels && d.light.is_none() {
+        errln!("probe: --test-levels needs a light (--light dmx:DEV or trigger:DEV)");
+        return exit::BAD_INPUT;
+    }
+    // With a camera named, --test-fire fires the camera (and counts its frames): the box's own
+    // test then sends no pulses of its own.
+    let camera_fires = matches!(d.camera, Some(CameraSpec::Orbbec(_))) && args.test_fire.is_some();
+    let box_test_fire = if camera_fires { None } else { args.test_fire };
     list_serial_ports();
     let mut failed: Vec<Failed> = Vec::new();
     // A box named as both light and trigger answers once (and test-fires as the trigger).
     let probed_as_light =
         |port: &str| matches!(&d.light, Some(LightSpec::Trigger { port: p }) if p == port);
-    let test_fire_light = if trigger_port.is_some() { None } else { args.test_fire };
+    let test_fire_light = if trigger_port.is_some() { None } else { box_test_fire };
     if let Some(spec) = &d.light {
         if let Err(why) = probe_light(spec, test_fire_light) {
             failed.push(Failed { device: "light", why });
         }
     }
     if let Some(port) = trigger_port {
-        let test_fire = args.test_fire;
+        let test_fire = box_test_fire;
         let probe = if probed_as_light(port) && test_fire.is_none() {
             Ok(())
         } else {
@@ -70,12 +92,22 @@ pub fn run(args: ProbeArgs) -> u8 {
             failed.push(Failed { device: "trigger", why });
         }
     }
+    if let (true, Some(spec)) = (args.test_levels, &d.light) {
+        if let Err(why) = levels::test_levels(spec) {
+            failed.push(Failed { device: "light", why });
+        }
+    }
     if let Some(host) = &d.arm {
-        if let Err(why) = probe_arm(host) {
+        if let Err(why) = arm::probe_arm(host, args.report_port) {
             failed.push(Failed { device: "arm", why });
         }
     }
-    if let Err(why) = probe_camera(matches!(d.camera, Some(CameraSpec::Orbbec(_)))) {
+    let box_port = trigger_port.or(match &d.light {
+        Some(LightSpec::Trigger { port }) => Some(port.as_str()),
+        _ => None,
+    });
+    let fire = box_port.zip(args.test_fire).filter(|_| camera_fires);
+    if let Err(why) = camera::probe_camera(d.camera, fire) {
         failed.push(Failed { device: "camera", why });
     }
     match failed.first() {
@@ -270,54 +302,4 @@ async fn test_fires(
             tb.fault().map(|f| format!(" ({})", f.message())).unwrap_or_default()
         ))
     }
-}
-
-fn probe_arm(host: &str) -> Result<(), String> {
-    let config = ClientConfig::default();
-    let connected = match host.parse::<std::net::SocketAddr>() {
-        Ok(addr) => XarmClient::connect(addr, config),
-        Err(_) => XarmClient::connect_host(host, config),
-    };
-    let mut arm = connected.map_err(|e| e.to_string())?;
-    let serial = arm.serial_number().map_err(|e| format!("serial number: {e}"))?;
-    let version = arm.version().map_err(|e| format!("firmware version: {e}"))?;
-    let state = arm.state().map_err(|e| format!("state: {e}"))?;
-    let (error, warning) = arm.codes().map_err(|e| format!("error codes: {e}"))?;
-    let table = JointTable::for_serial(&serial);
-    outln!("arm {host}: serial {serial}, firmware {version}");
-    outln!("  state {state}, error code {error}, warning code {warning}");
-    let limits = table
-        .limits()
-        .iter()
-        .enumerate()
-        .map(|(j, (lo, hi))| format!("J{} {:.4}..{:.4}", j + 1, lo, hi))
-        .collect::<Vec<_>>()
-        .join(", ");
-    outln!("  joint-limit table {table}: {limits} rad");
-    Ok(())
-}
-
-/// List the cameras the Orbbec SDK sees; with `--camera`, none is a failure.
-fn probe_camera(named: bool) -> Result<(), String> {
-    use hitl_drivers::orbbec::{probe, OrbbecOptions};
-    let library = OrbbecOptions::default_library();
-    let cameras = match probe(&library) {
-        Ok(c) => c,
-        Err(e) if named => return Err(e.to_string()),
-        Err(e) => {
-            outln!("cameras: cannot list ({e})");
-            return Ok(());
-        }
-    };
-    if cameras.is_empty() {
-        outln!("cameras: none found (Orbbec SDK at {})", library.display());
-        return if named { Err("no Orbbec camera connected".into()) } else { Ok(()) };
-    }
-    outln!("cameras:");
-    for c in &cameras {
-        for line in c.describe().lines() {
-            outln!("  {line}");
-        }
-    }
-    Ok(())
 }
