@@ -24,10 +24,11 @@ pub struct DeviceFlags {
     pub arm: Option<String>,
     /// Camera: sim (the stub's rendered camera), orbbec (hardware-triggered by the trigger box's
     /// camera line: needs --trigger), orbbec:hardware (the same), orbbec:software (a model
-    /// documented for software triggering, e.g. the Gemini 305), or none. Default sim for `run`
-    /// and `calibrate`; `probe` lists the cameras it sees and fails without one only when this
-    /// is given (`--camera` alone means orbbec).
-    #[arg(long, value_name = "sim|orbbec[:hardware|:software]|none", num_args = 0..=1,
+    /// documented for software triggering, e.g. the Gemini 305), or none; an Orbbec choice may
+    /// end in @SERIAL to name the camera (needed when several are connected). Default sim for
+    /// `run` and `calibrate`; `probe` lists the cameras it sees and fails without one only when
+    /// this is given (`--camera` alone means orbbec).
+    #[arg(long, value_name = "sim|orbbec[:hardware|:software][@SERIAL]|none", num_args = 0..=1,
           default_missing_value = "orbbec")]
     pub camera: Option<CameraSpec>,
     /// Light (the Sun): sim, dmx:DEV[,addr=N][,16bit] (Enttec DMX USB Pro), trigger:DEV (the
