@@ -4,12 +4,14 @@
 //! simulated camera.
 
 pub mod decimate;
+mod detailed;
 mod load;
 pub mod look;
 pub mod mesh;
 mod procedural;
 pub mod symmetry;
 
+pub use detailed::SPACECRAFT_NAMES;
 pub use load::{load_mesh_file, load_model_file};
 pub use look::{Material, Part, Texture};
 pub use mesh::Mesh;
@@ -66,7 +68,8 @@ impl TargetModel {
             return Err(PerceptionError::BadModel {
                 path: path.to_path_buf(),
                 reason: format!(
-                    "not a built-in target ({}) and not an .obj/.stl file",
+                    "not a built-in target ({}, {}) and not an .obj/.stl file",
+                    SPACECRAFT_NAMES.join(", "),
                     BUILTIN_NAMES.join(", ")
                 ),
             });

@@ -23,6 +23,9 @@ const CELL: f64 = 0.1;
 
 /// A built-in target by name, or `None`.
 pub fn builtin(name: &str) -> Option<TargetModel> {
+    if let Some(m) = super::detailed::builtin(name) {
+        return Some(m);
+    }
     let (symmetry, group, parts) = match name {
         "two-planes" => (SymmetryClass::TwoPlanes, "two-planes:z", parts(true, true, false)),
         "one-plane" => (SymmetryClass::OnePlane, "one-plane", parts(true, false, false)),
@@ -41,26 +44,38 @@ pub fn builtin(name: &str) -> Option<TargetModel> {
 
 /// The kinds of part a procedural spacecraft is made of, each with its material.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
-enum Kind {
+pub(super) enum Kind {
     Bus,
     SolarArray,
     Boom,
     Antenna,
     Thruster,
+    /// Edge rails of the bus and frames of the solar panels: anodised aluminium.
+    Frame,
+    /// Hinges and yokes of the arrays: bare metal.
+    Hinge,
+    /// Star trackers, cameras, horns: black anodised.
+    Instrument,
+    /// Radiator panels on the bus: white, glossy.
+    Radiator,
 }
 
 impl Kind {
-    fn name(self) -> &'static str {
+    pub(super) fn name(self) -> &'static str {
         match self {
             Kind::Bus => "bus",
             Kind::SolarArray => "solar-array",
             Kind::Boom => "boom",
             Kind::Antenna => "antenna",
             Kind::Thruster => "thruster",
+            Kind::Frame => "frame",
+            Kind::Hinge => "hinge",
+            Kind::Instrument => "instrument",
+            Kind::Radiator => "radiator",
         }
     }
 
-    fn material(self) -> Material {
+    pub(super) fn material(self) -> Material {
         let m = |rgba: [f32; 4], specular: f32, shininess: f32, texture: Option<Texture>| {
             Material { name: self.name().to_string(), rgba, specular, shininess, texture }
         };
@@ -81,21 +96,31 @@ impl Kind {
             Kind::Antenna => m([0.92, 0.92, 0.90, 1.0], 0.2, 0.2, None),
             // Dark metal: grey, fairly shiny.
             Kind::Boom | Kind::Thruster => m([0.22, 0.22, 0.24, 1.0], 0.7, 0.6, None),
+            // Clear-anodised aluminium: light grey, soft highlight.
+            Kind::Frame => m([0.62, 0.63, 0.66, 1.0], 0.5, 0.4, None),
+            // Bare machined metal: bright and sharp.
+            Kind::Hinge => m([0.75, 0.74, 0.70, 1.0], 0.9, 0.8, None),
+            // Black anodised optics housings and horns.
+            Kind::Instrument => m([0.06, 0.06, 0.07, 1.0], 0.3, 0.5, None),
+            // White radiator paint (silver-teflon look): bright, glossy.
+            Kind::Radiator => m([0.93, 0.94, 0.96, 1.0], 0.6, 0.6, None),
         }
     }
 }
 
 /// The merged mesh and the parts, built together.
 #[derive(Default)]
-struct Builder {
-    vertices: Vec<[f64; 3]>,
-    faces: Vec<[u32; 3]>,
-    parts: Vec<Part>,
+pub(super) struct Builder {
+    pub(super) vertices: Vec<[f64; 3]>,
+    pub(super) faces: Vec<[u32; 3]>,
+    pub(super) parts: Vec<Part>,
+    /// The symmetry axis the detailed models orient their round parts by (zero: z).
+    pub(super) axis: [f64; 3],
 }
 
 impl Builder {
     /// The part of `kind`, created on first use.
-    fn part(&mut self, kind: Kind) -> &mut Part {
+    pub(super) fn part(&mut self, kind: Kind) -> &mut Part {
         let i = match self.parts.iter().position(|p| p.name == kind.name()) {
             Some(i) => i,
             None => {
