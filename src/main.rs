@@ -48,6 +48,8 @@ enum Command {
     Campaign(cli::campaign::CampaignArgs),
     /// Export recordings: `hitl export lerobot RUN.mcap... --out DIR` (a LeRobot v3.0 dataset).
     Export(cli::export::ExportArgs),
+    /// List the targets (built-ins, or the named ones): faces, size, symmetry and parts.
+    Targets(cli::targets::TargetsArgs),
 }
 
 fn main() -> ExitCode {
@@ -74,6 +76,7 @@ fn main() -> ExitCode {
         Command::Calibrate(args) => cli::calibrate::run(args),
         Command::Campaign(args) => cli::campaign::run(args),
         Command::Export(args) => cli::export::run(args),
+        Command::Targets(args) => cli::targets::run(args),
     };
     ExitCode::from(code)
 }

@@ -19,3 +19,4 @@ pub mod stub;
 #[cfg(not(feature = "stub"))]
 #[path = "stub_absent.rs"]
 pub mod stub;
+pub mod targets;
