@@ -400,7 +400,7 @@ fn a_hardware_triggered_orbbec_without_the_trigger_box_is_refused_before_anythin
     let all = text(&run.out);
     assert_eq!(code(&run.out), 2, "{all}");
     assert!(all.contains("--camera orbbec is hardware-triggered"), "{all}");
-    assert!(all.contains("--light trigger:DEV"), "{all}");
+    assert!(all.contains("--trigger trigger:DEV"), "{all}");
     assert!(!all.contains("libusb"), "the SDK was not even loaded: {all}");
 }
 
