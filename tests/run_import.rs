@@ -72,10 +72,10 @@ fn a_file_moving_at_both_ends_plays_as_written_between_a_lead_in_and_a_lead_out(
     let phases: Vec<Phase> = rec.setpoints.iter().map(|s| s.phase).collect();
     let count = |p: Phase| phases.iter().filter(|x| **x == p).count();
     assert!(count(Phase::LeadIn) > 0 && count(Phase::LeadOut) > 0, "phases {phases:?}");
-    // In order: approach, lead-in, playback, lead-out (each one contiguous run).
+    // In order: approach, lead-in, playback, lead-out, retreat (each one contiguous run).
     let mut order: Vec<Phase> = phases.clone();
     order.dedup();
-    order.retain(|p| *p != Phase::Approach);
+    order.retain(|p| *p != Phase::Approach && *p != Phase::Retreat);
     assert_eq!(order, vec![Phase::LeadIn, Phase::Playback, Phase::LeadOut]);
 
     // Playback: 3 s at 250 Hz, 751 setpoints, following the file to 2e-3 rad.

@@ -403,6 +403,7 @@ fn play_views(
         // Back to the rest pose after the views, as every completed run.
         retreat: true,
         park: false,
+        stub_start_q: None,
         plain_progress: args.plain || !std::io::stderr().is_terminal(),
         live: None,
     };

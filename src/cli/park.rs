@@ -30,6 +30,11 @@ pub struct ParkArgs {
     /// SCHED_FIFO priority of the loop thread (0: normal scheduler).
     #[arg(long, default_value_t = 80, value_name = "PRIO")]
     pub rt_priority: i32,
+    /// SITL: the embedded stub's arm powers up at these joints (7 comma-separated radians), e.g.
+    /// where a stopped run left it. Refused with --arm.
+    #[arg(long, value_name = "Q", value_parser = crate::cli::check::parse_joints,
+          allow_hyphen_values = true)]
+    pub stub_start_q: Option<[f64; 7]>,
     /// Print plain progress lines even on a terminal.
     #[arg(long)]
     pub plain: bool,
@@ -46,6 +51,12 @@ pub fn run(args: ParkArgs) -> u8 {
     };
     let target = match arm {
         None => ArmTarget::Stub { faults: Vec::new() },
+        Some(_) if args.stub_start_q.is_some() => {
+            crate::errln!(
+                "hitl park: --stub-start-q only applies to the embedded stub, not to --arm"
+            );
+            return exit::BAD_INPUT;
+        }
         Some(host) => {
             if let Err(Refusal(code, m)) = args.labs.confirm_real_arm(host) {
                 crate::errln!("hitl park: {m}");
@@ -85,6 +96,7 @@ pub fn run(args: ParkArgs) -> u8 {
         },
         retreat: true,
         park: true,
+        stub_start_q: args.stub_start_q,
         plain_progress: args.plain || !std::io::stderr().is_terminal(),
         live: None,
     };

@@ -92,6 +92,11 @@ pub struct RunArgs {
     /// Spin for the last N microseconds before each deadline (tighter wake-ups, one busy core).
     #[arg(long, default_value_t = 0, value_name = "US")]
     pub spin_us: u64,
+    /// SITL: the embedded stub's arm powers up at these joints (7 comma-separated radians)
+    /// instead of its resting pose, e.g. where a previous run left the arm. Refused with --arm.
+    #[arg(long, value_name = "Q", value_parser = crate::cli::check::parse_joints,
+          allow_hyphen_values = true)]
+    pub stub_start_q: Option<[f64; 7]>,
     /// Leave the arm where the trajectory ends. By default a completed run goes back to the lab's
     /// rest pose (`[arm] rest_q`) along a planned, checked path, so the next run starts from rest.
     #[arg(long)]
@@ -160,6 +165,12 @@ pub fn run(args: RunArgs, record: bool) -> u8 {
     let target = match arm {
         None => ArmTarget::Stub { faults: args.stub_faults.clone() },
         Some(host) => {
+            if args.stub_start_q.is_some() {
+                crate::errln!(
+                    "hitl run: --stub-start-q only applies to the embedded stub, not to --arm"
+                );
+                return exit::BAD_INPUT;
+            }
             if !args.stub_faults.is_empty() {
                 crate::errln!(
                     "hitl run: --stub-fault only applies to the embedded stub, not to --arm"
@@ -215,6 +226,7 @@ pub fn run(args: RunArgs, record: bool) -> u8 {
         },
         retreat: !args.no_retreat,
         park: false,
+        stub_start_q: args.stub_start_q,
         plain_progress: args.plain || !std::io::stderr().is_terminal(),
         live: args.live.map(LiveConfig::new),
     };

@@ -15,7 +15,7 @@ use super::setpoint::Setpoint;
 use hitl_hal::Joints;
 use hitl_trajectories::lab::LabConfig;
 use hitl_trajectories::path::{self, FoundPath, PathError, PathOptions};
-use hitl_trajectories::preflight::{self, Clearance, MoveProfile, PreflightReport};
+use hitl_trajectories::preflight::{self, Clearance, MoveProfile, PreflightReport, Rule};
 use std::collections::BTreeMap;
 use std::time::Instant;
 
@@ -151,9 +151,57 @@ pub fn plan_safe_move(
     let t0 = Instant::now();
     let path =
         path::find_path(from, to, lab, &PathOptions::default()).map_err(MoveRefused::NoPath)?;
+    let limits = approach_limits(lab);
+    // A lab whose TCP speed limit the approach limits would break (a slow lab) gets the move
+    // slowed down until it passes: velocity by the ratio, acceleration and jerk by its square and
+    // cube (a few tries, each confirmed by the full check).
+    let mut scale = 1.0;
+    for _ in 0..4 {
+        let scaled = MoveLimits {
+            velocity: limits.velocity.map(|v| v * scale),
+            acceleration: limits.acceleration.map(|a| a * scale * scale),
+            jerk: limits.jerk.map(|j| j * scale * scale * scale),
+        };
+        let (setpoints, report) = time_and_check(name, from, &path, &scaled, lab, rate_hz)?;
+        if report.is_safe() {
+            return Ok(PlannedMove {
+                name,
+                setpoints,
+                path,
+                report,
+                planning_s: t0.elapsed().as_secs_f64(),
+            });
+        }
+        let only_tcp = report.violations.iter().all(|v| v.rule == Rule::TcpSpeed);
+        let tcp = &report.tcp_speed;
+        // NaN or no speed at all: nothing slowing down can cure.
+        if !only_tcp || tcp.peak_m_s.is_nan() || tcp.peak_m_s <= 0.0 {
+            return Err(MoveRefused::Unsafe(violation_lines(&report)));
+        }
+        scale *= 0.95 * tcp.limit_m_s / tcp.peak_m_s;
+    }
+    let (_, report) = time_and_check(name, from, &path, &limits, lab, rate_hz)?;
+    Err(MoveRefused::Unsafe(violation_lines(&report)))
+}
+
+fn violation_lines(report: &PreflightReport) -> String {
+    let lines: Vec<String> =
+        report.violations.iter().map(|v| format!("  - {}", v.message)).collect();
+    lines.join("\n")
+}
+
+/// Time `path` as straight rest-to-rest legs within `limits` and run the preflight over every
+/// tick of it.
+fn time_and_check(
+    name: &str,
+    from: &Joints,
+    path: &FoundPath,
+    limits: &MoveLimits,
+    lab: &LabConfig,
+    rate_hz: f64,
+) -> Result<(Vec<Setpoint>, PreflightReport), MoveRefused> {
     let dt = 1.0 / rate_hz;
-    let (setpoints, ends) =
-        plan_path(&path.waypoints, &approach_limits(lab), dt).map_err(MoveRefused::Motion)?;
+    let (setpoints, ends) = plan_path(&path.waypoints, limits, dt).map_err(MoveRefused::Motion)?;
     let mut profile = MoveProfile {
         name: name.to_string(),
         rate_hz,
@@ -171,12 +219,7 @@ pub fn plan_safe_move(
         profile.qdd.push(s.qdd);
     }
     let report = preflight::check_move(&profile, lab);
-    if !report.is_safe() {
-        let lines: Vec<String> =
-            report.violations.iter().map(|v| format!("  - {}", v.message)).collect();
-        return Err(MoveRefused::Unsafe(lines.join("\n")));
-    }
-    Ok(PlannedMove { name, setpoints, path, report, planning_s: t0.elapsed().as_secs_f64() })
+    Ok((setpoints, report))
 }
 
 #[cfg(test)]
@@ -203,6 +246,19 @@ mod tests {
         // The retreat from there is planned the same way.
         let back = plan_safe_move("retreat", &STATION, &DEFAULT_REST_Q, &lab, 250.0).expect("");
         assert_eq!(back.setpoints.last().expect("setpoints").q, DEFAULT_REST_Q);
+    }
+
+    #[test]
+    fn a_lab_with_a_slow_tcp_limit_gets_a_slower_move() {
+        let mut lab = LabConfig::default();
+        lab.limits.tcp_speed_m_s = 0.02;
+        let mut goal = DEFAULT_REST_Q;
+        goal[1] += 0.1;
+        let m = plan_safe_move("approach", &DEFAULT_REST_Q, &goal, &lab, 250.0).expect("plan");
+        assert!(m.report.tcp_speed.peak_m_s <= 0.02, "{:?}", m.report.tcp_speed);
+        let fast = plan_safe_move("approach", &DEFAULT_REST_Q, &goal, &LabConfig::default(), 250.0)
+            .expect("plan");
+        assert!(m.duration_s() > 2.0 * fast.duration_s());
     }
 
     #[test]

@@ -23,7 +23,8 @@ pub struct EmbeddedStub {
 }
 
 /// Start the stub on loopback for `lab`, with `target` (in model units) shown at `scale`, the
-/// scene drawn as `scene` says, and `faults` scheduled from its start.
+/// scene drawn as `scene` says, and `faults` scheduled from its start; its arm powers up at
+/// `initial_q` (`None`: the stub's own power-up pose).
 ///
 /// `fifo_priority` is the run loop's SCHED_FIFO priority, if it has one. A box has CPUs of its
 /// own; the embedded stub shares the run's, so its threads (physics, command and report ports)
@@ -37,6 +38,7 @@ pub fn start_stub(
     scale: f64,
     scene: &hitl_sim_stub::mjcf::SceneOptions,
     fifo_priority: Option<i32>,
+    initial_q: Option<hitl_hal::Joints>,
 ) -> Result<EmbeddedStub, DeviceError> {
     let lab_model = LabModel::generated_scene(lab, &stub_target(target, scale), scene)
         .map_err(|e| DeviceError::Failed(format!("stub scene: {e}")))?;
@@ -50,7 +52,11 @@ pub fn start_stub(
         }),
         None => hitl_sim_stub::ThreadStart::default(),
     };
-    let config = StubConfig { faults: faults.to_vec(), thread_start, ..StubConfig::ephemeral() };
+    let mut config =
+        StubConfig { faults: faults.to_vec(), thread_start, ..StubConfig::ephemeral() };
+    if let Some(q) = initial_q {
+        config.initial_q = q;
+    }
     let handle = Stub::start(config, Box::new(plant))
         .map_err(|e| DeviceError::Failed(format!("stub: {e}")))?;
     Ok(EmbeddedStub {

@@ -79,9 +79,9 @@ pub struct ArmPlacement {
     pub rest_q: [f64; DOF],
 }
 
-/// The default rest pose, radians: the embedded stub's power-up pose (upper arm back, elbow and
-/// wrist bent, the camera over the base looking forward and down at the target from about
-/// 0.35 m), clear of every wall and keep-out of the default lab.
+/// The default rest pose, radians: the embedded stub's power-up pose. In the default lab the
+/// camera is 0.16 m from the target centre, every capsule at least 0.098 m from the keep-outs and
+/// 0.2 m from the enclosure's faces.
 pub const DEFAULT_REST_Q: [f64; DOF] = [0.0, -0.5, 0.0, 0.9, 0.0, 1.4, 0.0];
 
 impl Default for ArmPlacement {
