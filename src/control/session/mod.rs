@@ -231,7 +231,8 @@ impl RunReport {
                 }
             ),
             Outcome::Tripped { trip, stopped } => format!(
-                "stopped by {} at tick {}: {} ({})",
+                "stopped by {} at tick {}: {} ({}); the arm stays where it stopped: once the \
+                 cause is cleared, `hitl park` takes it back to the rest pose along a planned path",
                 trip.kind.name(),
                 trip.tick,
                 trip.kind.detail(),
