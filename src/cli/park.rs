@@ -27,8 +27,9 @@ pub struct ParkArgs {
     /// Record the move to this MCAP file.
     #[arg(long, value_name = "FILE.mcap")]
     pub record: Option<PathBuf>,
-    /// SCHED_FIFO priority of the loop thread (0: normal scheduler).
-    #[arg(long, default_value_t = 80, value_name = "PRIO")]
+    /// SCHED_FIFO priority of the loop thread, 1-99 (0: normal scheduler).
+    #[arg(long, default_value_t = 80, value_name = "PRIO",
+          value_parser = clap::value_parser!(i32).range(0..=99))]
     pub rt_priority: i32,
     /// SITL: the embedded stub's arm powers up at these joints (7 comma-separated radians), e.g.
     /// where a stopped run left it. Refused with --arm.
