@@ -159,10 +159,8 @@ pub fn run(args: BenchArgs) -> u8 {
             rate_hz: args.rate,
             load: args.load,
             rt: RtOptions {
-                fifo_priority: (args.rt_priority > 0).then_some(args.rt_priority),
-                lock_memory: true,
-                cpu: None,
                 spin: Duration::from_micros(args.spin_us),
+                ..RtOptions::with_priority(args.rt_priority)
             },
             python: venv_python().or_else(|| Some("python3".into())),
         }),

@@ -36,7 +36,6 @@ use nalgebra::Isometry3;
 use std::io::IsTerminal;
 use std::ops::ControlFlow;
 use std::path::{Path, PathBuf};
-use std::time::Duration;
 
 /// Exit code: fewer usable views than the minimum (take more views).
 pub const TOO_FEW_VIEWS: u8 = 10;
@@ -394,12 +393,7 @@ fn play_views(
         target_model: "asymmetric".into(),
         stub_lab,
         depth_model: Default::default(),
-        rt: RtOptions {
-            fifo_priority: (args.rt_priority > 0).then_some(args.rt_priority),
-            lock_memory: true,
-            cpu: None,
-            spin: Duration::ZERO,
-        },
+        rt: RtOptions::with_priority(args.rt_priority),
         // Back to the rest pose after the views, as every completed run.
         retreat: true,
         park: false,

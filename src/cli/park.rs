@@ -13,7 +13,6 @@ use crate::rt::RtOptions;
 use hitl_perception::{BackendSpec, ReregisterPolicy};
 use std::io::IsTerminal;
 use std::path::PathBuf;
-use std::time::Duration;
 
 #[derive(Debug, clap::Args)]
 pub struct ParkArgs {
@@ -89,12 +88,7 @@ pub fn run(args: ParkArgs) -> u8 {
         target_model: "asymmetric".into(),
         stub_lab: labs.stub,
         depth_model: Default::default(),
-        rt: RtOptions {
-            fifo_priority: (args.rt_priority > 0).then_some(args.rt_priority),
-            lock_memory: true,
-            cpu: None,
-            spin: Duration::ZERO,
-        },
+        rt: RtOptions::with_priority(args.rt_priority),
         retreat: true,
         park: true,
         stub_start_q: args.stub_start_q,

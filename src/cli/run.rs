@@ -219,10 +219,9 @@ pub fn run(args: RunArgs, record: bool) -> u8 {
         stub_lab: labs.stub,
         depth_model: args.depth_model,
         rt: RtOptions {
-            fifo_priority: (args.rt_priority > 0).then_some(args.rt_priority),
-            lock_memory: true,
             cpu: args.cpu,
             spin: Duration::from_micros(args.spin_us),
+            ..RtOptions::with_priority(args.rt_priority)
         },
         retreat: !args.no_retreat,
         park: false,

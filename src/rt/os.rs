@@ -29,6 +29,13 @@ impl Default for RtOptions {
     }
 }
 
+impl RtOptions {
+    /// The defaults at the `--rt-priority` the operator gave: 0 leaves the normal scheduler.
+    pub fn with_priority(priority: i32) -> Self {
+        Self { fifo_priority: (priority > 0).then_some(priority), ..Self::default() }
+    }
+}
+
 /// What took effect, for the operator and the run record.
 #[derive(Debug, Clone, Default, PartialEq, Eq, serde::Serialize)]
 pub struct RtReport {
@@ -185,5 +192,18 @@ pub fn sleep_until_ns(deadline_ns: u64) {
         if rc != libc::EINTR {
             return;
         }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn the_operators_priority_zero_means_the_normal_scheduler() {
+        assert_eq!(RtOptions::with_priority(0).fifo_priority, None);
+        let o = RtOptions::with_priority(42);
+        assert_eq!(o.fifo_priority, Some(42));
+        assert!(o.lock_memory && o.cpu.is_none() && o.spin.is_zero());
     }
 }
