@@ -144,7 +144,10 @@ fn a_fly_around_plays_from_rest_and_ends_at_rest() {
     let _one = ONE_AT_A_TIME.lock().unwrap_or_else(|e| e.into_inner());
     let dir = tempfile::tempdir().expect("tempdir");
     let traj = plan(dir.path(), "flyaround", "50", "20", "2");
-    let (out, rec) = play(&traj, &[]);
+    // At half speed: the wrist turns up to ~1 rad/s at full speed, so a 150 ms stall of the stub's
+    // physics on a loaded 2-vCPU machine tripped the shared-VM lab's 0.15 rad deviation limit
+    // mid-playback; this test is about the moves around the playback, not about tracking.
+    let (out, rec) = play(&traj, &["--speed-scale", "0.5"]);
     assert_eq!(out.status.code(), Some(0), "{}", text(&out));
     assert_eq!(phases(&rec), [Phase::Approach, Phase::Playback, Phase::Retreat]);
     moves_keep_their_clearances(&rec);
