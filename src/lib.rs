@@ -16,3 +16,5 @@ pub mod devices;
 pub mod exit;
 pub mod export;
 pub mod rt;
+pub mod session;
+pub mod telemetry;

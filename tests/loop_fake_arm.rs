@@ -3,15 +3,16 @@
 //! nothing, with the fake arm and with the real `XarmClient` talking to the stub's protocol
 //! server. (End-to-end runs against the MuJoCo stub are in `run_stub.rs`.)
 
-use hitl::control::interlocks::{Interlocks, Thresholds, TripKind};
+use hitl::control::interlocks::{Interlocks, Thresholds};
 use hitl::control::motion::{plan_move, MoveLimits};
-use hitl::control::setpoint::Setpoint;
 use hitl::control::stop::StopPlanner;
-use hitl::control::telemetry::{LoopStatus, NoTelemetry};
 use hitl::control::tick::{ControlLoop, Devices, Health, LoopIo, Outcome, Program};
 use hitl::devices::none::{NoCamera, NoInputs, NoLight, NoTrigger};
 use hitl::rt::probe;
 use hitl::rt::slot::LatestSlot;
+use hitl::telemetry::TripKind;
+use hitl::telemetry::{LoopStatus, NoTelemetry};
+use hitl_hal::JointState;
 use hitl_hal::{Arm, ArmState, Clock, ErrorKind, ErrorType, Joints, MonotonicClock};
 use std::alloc::{GlobalAlloc, Layout, System};
 use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
@@ -122,12 +123,12 @@ fn program() -> Program {
     first[0] = 0.05;
     let approach =
         plan_move(&START, &first, &MoveLimits::uniform(0.3, 0.8, 8.0), dt).expect("approach");
-    let playback: Vec<Setpoint> = (0..250)
+    let playback: Vec<JointState> = (0..250)
         .map(|k| {
             let t = k as f64 * dt;
             let mut q = first;
             q[0] = 0.05 + 0.05 * (1.0 - (std::f64::consts::PI * t).cos());
-            let mut sp = Setpoint::rest(q);
+            let mut sp = JointState::rest(q);
             sp.qd[0] = 0.05 * std::f64::consts::PI * (std::f64::consts::PI * t).sin();
             sp
         })

@@ -16,6 +16,7 @@ pub mod error;
 pub mod inputs;
 pub mod lifecycle;
 pub mod light;
+pub mod motion;
 pub mod pose;
 pub mod trigger;
 
@@ -28,6 +29,7 @@ pub use error::{Error, ErrorKind, ErrorType};
 pub use inputs::{InputState, Inputs};
 pub use lifecycle::Lifecycle;
 pub use light::Light;
+pub use motion::{JointState, Phase};
 pub use pose::Pose;
 pub use trigger::{FireReport, Trigger, TriggerLines};
 

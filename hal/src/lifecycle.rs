@@ -2,7 +2,7 @@
 //! driver's constructor), started, checked every tick, stopped. Every step has a no-op default,
 //! so a device implements only the steps it needs.
 //!
-//! When the session calls each step (src/control/session, docs/devices.md):
+//! When the session calls each step (src/session, docs/devices.md):
 //!
 //! 1. **open** is the driver's own constructor (`DmxLight::open`, `TriggerBox::open`, ...): it
 //!    claims the port or device and checks that it answers. Nothing moves yet.

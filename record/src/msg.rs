@@ -7,28 +7,9 @@
 use hitl_hal::{ArmState, CaptureRequest, Intrinsics, Pose, RgbdFrame, DOF};
 use serde::{Deserialize, Serialize};
 
-/// Which part of a run a setpoint belongs to.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
-#[serde(rename_all = "lowercase")]
-pub enum Phase {
-    /// The slow, planned move from the arm's pose to the trajectory's first waypoint.
-    Approach,
-    /// Playing the trajectory.
-    Playback,
-    /// A controlled (jerk-limited) stop.
-    Stop,
-    /// The planned move from rest into the first waypoint's motion (a trajectory that starts
-    /// moving).
-    #[serde(rename = "lead_in")]
-    LeadIn,
-    /// The planned move from the last waypoint's motion to rest (a trajectory that ends moving),
-    /// and the hold at its end while the arm settles.
-    #[serde(rename = "lead_out")]
-    LeadOut,
-    /// After a completed run, the planned move back to the lab's rest pose and the hold there
-    /// (`hitl park` records its move as one too).
-    Retreat,
-}
+/// Which part of a run a setpoint belongs to: the hal's one [`Phase`]. `/arm/setpoint` never
+/// holds [`Phase::Settle`] (it is recorded as playback, [`Phase::recorded`]).
+pub use hitl_hal::Phase;
 
 /// `/arm/setpoint`: the setpoint the tick sent to the arm.
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]

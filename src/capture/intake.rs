@@ -7,7 +7,7 @@ use super::history::StateHistory;
 use super::mask::{MaskDrawer, MaskSource, MaskStats};
 use super::sink::IntakeQueues;
 use super::truth::LabFrames;
-use crate::control::telemetry::CaptureOut;
+use crate::telemetry::CaptureOut;
 use hitl_hal::RgbdFrame;
 use hitl_perception::{PerceptionFrame, WorkerHandle};
 use hitl_record::{CaptureSyncMsg, EventKind, FrameRecord, SafetyEventMsg, Telemetry};

@@ -4,14 +4,13 @@
 //! A lost frame is not dropped here, which would free its image buffers on the loop thread: it
 //! goes to the discard queue, and the intake thread frees it.
 
-use crate::control::interlocks::{Trip, TripKind};
-use crate::control::setpoint::Phase;
-use crate::control::telemetry::{CaptureOut, SetpointOut, TelemetrySink, TimingOut};
+use crate::telemetry::{CaptureOut, SetpointOut, TelemetrySink, TimingOut};
+use crate::telemetry::{Trip, TripKind};
 use crossbeam::queue::ArrayQueue;
 use hitl_hal::{ArmState, FireReport, RgbdFrame, Trigger};
 use hitl_record::{
-    ArmStateMsg, EventKind, LightMsg, Phase as RecPhase, SafetyEventMsg, SetpointMsg, Telemetry,
-    TimingMsg, TriggerFiredMsg,
+    ArmStateMsg, EventKind, LightMsg, SafetyEventMsg, SetpointMsg, Telemetry, TimingMsg,
+    TriggerFiredMsg,
 };
 use std::sync::atomic::{AtomicU64, Ordering};
 use std::sync::Arc;
@@ -62,18 +61,6 @@ pub struct RunTelemetry {
     pub intake: Arc<IntakeQueues>,
 }
 
-fn phase(p: Phase) -> RecPhase {
-    match p {
-        Phase::Approach => RecPhase::Approach,
-        // Settling holds the last waypoint: it is the end of playback on the contract's topic.
-        Phase::Playback | Phase::Settle => RecPhase::Playback,
-        Phase::Stop => RecPhase::Stop,
-        Phase::LeadIn => RecPhase::LeadIn,
-        Phase::LeadOut => RecPhase::LeadOut,
-        Phase::Retreat => RecPhase::Retreat,
-    }
-}
-
 /// The recorder's event for a trip, with its numbers (no text: the tick cannot format).
 fn trip_event(trip: &Trip) -> SafetyEventMsg {
     let (kind, joint, value, limit) = match trip.kind {
@@ -115,7 +102,7 @@ impl TelemetrySink for RunTelemetry {
             r.push_setpoint(&SetpointMsg {
                 tick: m.tick,
                 t_ns: m.t_ns,
-                phase: phase(m.phase),
+                phase: m.phase.recorded(),
                 q: m.setpoint.q,
                 qd: m.setpoint.qd,
             });

@@ -19,9 +19,9 @@
 //! [`MIN_PLANNED_VIEWS`] reachable views is refused before anything moves.
 
 use crate::cli::device_flags::{DeviceFlags, LabFlags, Labs, Refusal, SimCameraFlags};
-use crate::control::session::{self, ArmTarget, RunRequest};
 use crate::exit;
 use crate::rt::RtOptions;
+use crate::session::{self, ArmTarget, RunRequest};
 use foxglove::messages as fg;
 use hitl_calib::board::{load_board_file, Board};
 use hitl_calib::solve::{self, Acceptance, SolveError, View};

@@ -6,10 +6,10 @@
 //! no safe path (the message names the obstacle in the way), 4 interlock, 5 device, 130 operator.
 
 use crate::cli::device_flags::{DeviceFlags, LabFlags, Refusal};
-use crate::control::session::{self, ArmTarget, RunRequest};
 use crate::devices::{CameraSpec, LightSpec, TriggerSpec};
 use crate::exit;
 use crate::rt::RtOptions;
+use crate::session::{self, ArmTarget, RunRequest};
 use hitl_perception::{BackendSpec, ReregisterPolicy};
 use std::io::IsTerminal;
 use std::path::PathBuf;

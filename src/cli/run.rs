@@ -7,10 +7,10 @@
 use crate::capture::mask::{MaskSource, DEFAULT_MARGIN_PX};
 use crate::cli::device_flags::{DeviceFlags, LabFlags, Refusal, SimCameraFlags};
 use crate::cli::reregister::ReregisterArgs;
-use crate::control::session::{self, ArmTarget, RunRequest, StubFault};
 use crate::devices::CameraSpec;
 use crate::exit;
 use crate::rt::RtOptions;
+use crate::session::{self, ArmTarget, RunRequest, StubFault};
 use hitl_perception::BackendSpec;
 use hitl_record::live::DEFAULT_LIVE_ADDR;
 use hitl_record::{ChunkCompression, LiveConfig, RecorderConfig};

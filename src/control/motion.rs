@@ -7,10 +7,10 @@
 //! setpoints, so the tick only reads a table. Planning allocates: it runs before the loop
 //! (approach) or on the stop planner's thread (stops), never in the tick.
 
-use super::setpoint::Setpoint;
+use hitl_hal::JointState;
 use hitl_hal::{Joints, DOF};
 use hitl_trajectories::lab::LabConfig;
-use hitl_trajectories::timing::{JointState, SetpointTable};
+use hitl_trajectories::timing::SetpointTable;
 use ruckig::{
     ControlInterface, InputParameter, Result as RuckigResult, Ruckig, Synchronization, Trajectory,
 };
@@ -60,7 +60,7 @@ fn set_limits(input: &mut InputParameter, limits: &MoveLimits) {
 fn sample_into(
     trajectory: &Trajectory,
     dt: f64,
-    out: &mut [Setpoint],
+    out: &mut [JointState],
 ) -> Result<usize, MotionError> {
     let duration = trajectory.get_duration();
     let steps = (duration / dt).ceil().max(1.0) as usize;
@@ -84,7 +84,7 @@ pub fn plan_move(
     to: &Joints,
     limits: &MoveLimits,
     dt: f64,
-) -> Result<Vec<Setpoint>, MotionError> {
+) -> Result<Vec<JointState>, MotionError> {
     plan_move_synchronized(from, to, limits, dt, Synchronization::Time)
 }
 
@@ -96,7 +96,7 @@ pub fn plan_straight_move(
     to: &Joints,
     limits: &MoveLimits,
     dt: f64,
-) -> Result<Vec<Setpoint>, MotionError> {
+) -> Result<Vec<JointState>, MotionError> {
     plan_move_synchronized(from, to, limits, dt, Synchronization::Phase)
 }
 
@@ -107,7 +107,7 @@ pub fn plan_path(
     waypoints: &[Joints],
     limits: &MoveLimits,
     dt: f64,
-) -> Result<(Vec<Setpoint>, Vec<usize>), MotionError> {
+) -> Result<(Vec<JointState>, Vec<usize>), MotionError> {
     let mut out = Vec::new();
     let mut ends = Vec::new();
     for leg in waypoints.windows(2) {
@@ -123,7 +123,7 @@ fn plan_move_synchronized(
     limits: &MoveLimits,
     dt: f64,
     synchronization: Synchronization,
-) -> Result<Vec<Setpoint>, MotionError> {
+) -> Result<Vec<JointState>, MotionError> {
     if from.iter().chain(to.iter()).any(|v| !v.is_finite()) {
         return Err(MotionError::NotFinite);
     }
@@ -136,11 +136,11 @@ fn plan_move_synchronized(
     input.target_position = to.to_vec();
     set_limits(&mut input, limits);
     let trajectory = calculate(&mut input)?;
-    let mut out = vec![Setpoint::default(); (trajectory.get_duration() / dt).ceil() as usize + 1];
+    let mut out = vec![JointState::default(); (trajectory.get_duration() / dt).ceil() as usize + 1];
     let n = sample_into(&trajectory, dt, &mut out)?;
     out.truncate(n);
     if let Some(last) = out.last_mut() {
-        *last = Setpoint::rest(*to);
+        *last = JointState::rest(*to);
     }
     Ok(out)
 }
@@ -148,10 +148,10 @@ fn plan_move_synchronized(
 /// A jerk-limited stop from the moving state `from`: velocity and acceleration brought to zero
 /// as fast as `limits` allow, sampled every `dt` into `out`. Returns how many samples it took.
 pub fn plan_stop(
-    from: &Setpoint,
+    from: &JointState,
     limits: &MoveLimits,
     dt: f64,
-    out: &mut [Setpoint],
+    out: &mut [JointState],
 ) -> Result<usize, MotionError> {
     let values = from.q.iter().chain(from.qd.iter()).chain(from.qdd.iter());
     if values.into_iter().any(|v| !v.is_finite()) {
@@ -369,8 +369,8 @@ mod tests {
         let limits = MoveLimits::uniform(0.3, 0.8, 8.0);
         let (path, ends) = plan_path(&[a, b, c], &limits, 0.004).expect("plan");
         assert_eq!(ends.len(), 2);
-        assert_eq!(path[ends[0] - 1], Setpoint::rest(b));
-        assert_eq!(path[ends[1] - 1], Setpoint::rest(c));
+        assert_eq!(path[ends[0] - 1], JointState::rest(b));
+        assert_eq!(path[ends[1] - 1], JointState::rest(c));
         assert_eq!(ends[1], path.len());
         // On the line a-b every sample is a + s (b - a) for one s.
         for sp in &path[..ends[0]] {
@@ -384,9 +384,9 @@ mod tests {
     #[test]
     fn a_stop_brings_velocity_to_zero_smoothly() {
         let from =
-            Setpoint { q: [0.0; DOF], qd: [1.0, -0.5, 0.0, 0.2, 0.0, 0.0, 0.0], qdd: [0.0; DOF] };
+            JointState { q: [0.0; DOF], qd: [1.0, -0.5, 0.0, 0.2, 0.0, 0.0, 0.0], qdd: [0.0; DOF] };
         let limits = MoveLimits::uniform(1.0, 4.0, 60.0);
-        let mut out = vec![Setpoint::default(); 1000];
+        let mut out = vec![JointState::default(); 1000];
         let n = plan_stop(&from, &limits, 0.004, &mut out).expect("stop");
         assert_eq!(out[n - 1].qd, [0.0; DOF]);
         // Joint 1 keeps moving forward while it brakes, and stops in well under a second.

@@ -11,7 +11,7 @@
 //! the same setpoints.
 
 use super::motion::{plan_path, MotionError, MoveLimits};
-use super::setpoint::Setpoint;
+use hitl_hal::JointState;
 use hitl_hal::Joints;
 use hitl_trajectories::lab::LabConfig;
 use hitl_trajectories::path::{self, FoundPath, PathError, PathOptions};
@@ -26,7 +26,7 @@ pub struct PlannedMove {
     pub name: &'static str,
     /// One setpoint per tick after the start, the last at rest on the goal (empty when the arm
     /// is already there).
-    pub setpoints: Vec<Setpoint>,
+    pub setpoints: Vec<JointState>,
     /// The path: start, via points, goal.
     pub path: FoundPath,
     /// The preflight of every tick of the move.
@@ -199,7 +199,7 @@ fn time_and_check(
     limits: &MoveLimits,
     lab: &LabConfig,
     rate_hz: f64,
-) -> Result<(Vec<Setpoint>, PreflightReport), MoveRefused> {
+) -> Result<(Vec<JointState>, PreflightReport), MoveRefused> {
     let dt = 1.0 / rate_hz;
     let (setpoints, ends) = plan_path(&path.waypoints, limits, dt).map_err(MoveRefused::Motion)?;
     let mut profile = MoveProfile {

@@ -7,8 +7,8 @@
 //! The planner's buffer is allocated when the planner starts, before the loop.
 
 use super::motion::{plan_stop, MoveLimits};
-use super::setpoint::Setpoint;
 use crossbeam::queue::ArrayQueue;
+use hitl_hal::JointState;
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::Arc;
 use std::thread::{self, JoinHandle, Thread};
@@ -18,7 +18,7 @@ use std::time::Duration;
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct StopRequest {
     /// The last setpoint sent before the trip.
-    pub from: Setpoint,
+    pub from: JointState,
     /// The tick that setpoint was sent on.
     pub from_tick: u64,
 }
@@ -27,20 +27,20 @@ pub struct StopRequest {
 #[derive(Debug)]
 pub struct StopPlan {
     pub from_tick: u64,
-    samples: Box<[Setpoint]>,
+    samples: Box<[JointState]>,
     len: usize,
 }
 
 impl StopPlan {
     /// The setpoint for `tick`, or `None` once the stop is complete. `None` also for an empty
     /// plan (Ruckig refused), in which case the tick holds.
-    pub fn at(&self, tick: u64) -> Option<&Setpoint> {
+    pub fn at(&self, tick: u64) -> Option<&JointState> {
         let i = tick.checked_sub(self.from_tick + 1)?;
         self.samples[..self.len].get(usize::try_from(i).ok()?)
     }
 
     /// Where the stop ends, when there is a plan.
-    pub fn last(&self) -> Option<&Setpoint> {
+    pub fn last(&self) -> Option<&JointState> {
         self.samples[..self.len].last()
     }
 
@@ -88,7 +88,7 @@ impl StopPlanner {
         let plans = Arc::new(ArrayQueue::new(1));
         let shutdown = Arc::new(AtomicBool::new(false));
         let capacity = ((max_seconds / dt).ceil() as usize).max(2);
-        let mut buffer = Some(vec![Setpoint::default(); capacity].into_boxed_slice());
+        let mut buffer = Some(vec![JointState::default(); capacity].into_boxed_slice());
         let (req, out, stop) = (Arc::clone(&requests), Arc::clone(&plans), Arc::clone(&shutdown));
         let handle = thread::Builder::new().name("hitl-stop-planner".into()).spawn(move || {
             while !stop.load(Ordering::Acquire) {
@@ -124,7 +124,7 @@ mod tests {
     fn a_request_comes_back_as_a_plan_indexed_by_tick() {
         let limits = MoveLimits::uniform(1.0, 4.0, 60.0);
         let (_planner, requester) = StopPlanner::start(limits, 0.004, 5.0).expect("start");
-        let from = Setpoint {
+        let from = JointState {
             q: [0.1; hitl_hal::DOF],
             qd: [0.5; hitl_hal::DOF],
             qdd: [0.0; hitl_hal::DOF],

@@ -8,15 +8,16 @@
 //! tick asks every device for its health (hal's `Lifecycle::health`), so a device whose I/O task
 //! failed trips the run within one period even when the tick had nothing to ask it.
 
-use super::interlocks::{Device, Interlocks, Reaction, Sense, Trip, TripKind};
-use super::setpoint::{Phase, Setpoint};
+use super::interlocks::{Interlocks, Reaction, Sense};
 use super::stop::{StopPlan, StopRequest, StopRequester};
-use super::telemetry::{CaptureOut, LoopStatus, SetpointOut, TelemetrySink, TimingOut};
 use crate::rt::{probe, slot::SlotReader, Periodic, Wake};
+use crate::telemetry::{CaptureOut, LoopStatus, SetpointOut, TelemetrySink, TimingOut};
+use crate::telemetry::{Device, Trip, TripKind};
 use hitl_hal::{
     Arm, ArmState, CaptureRequest, Clock, Error as _, ErrorKind, Inputs, Lifecycle, Light,
     MonotonicClock, RgbdCamera, Trigger, TriggerLines,
 };
+use hitl_hal::{JointState, Phase};
 use std::sync::atomic::{AtomicBool, AtomicU8, Ordering};
 use std::sync::Arc;
 use std::time::Duration;
@@ -29,9 +30,9 @@ const MAX_BRIDGE_TICKS: u64 = 25;
 #[derive(Debug, Clone, Default)]
 pub struct Program {
     /// The approach from the arm's pose to the first waypoint, one setpoint per tick.
-    pub approach: Vec<Setpoint>,
+    pub approach: Vec<JointState>,
     /// The time-parametrised trajectory, one setpoint per tick.
-    pub playback: Vec<Setpoint>,
+    pub playback: Vec<JointState>,
     /// Per playback tick: fire a capture.
     pub capture: Vec<bool>,
     /// Per playback tick: the light level (empty: leave the light alone).
@@ -50,7 +51,7 @@ pub struct Program {
     /// After the playback has settled (or its settle timed out): the planned move back to the
     /// rest pose, one setpoint per tick, then a settle on its end (empty: the arm stays where the
     /// playback ended). Recorded as `retreat`.
-    pub retreat: Vec<Setpoint>,
+    pub retreat: Vec<JointState>,
 }
 
 impl Program {
@@ -153,7 +154,7 @@ pub struct ControlLoop<'p, A, C, L, I, G, T> {
     stop: StopRequester,
     clock: MonotonicClock,
     dt: f64,
-    last_sent: Setpoint,
+    last_sent: JointState,
     last_sent_tick: u64,
     trip: Option<Trip>,
     stop_plan: Option<StopPlan>,
@@ -193,7 +194,7 @@ where
             stop: io.stop,
             clock: io.clock,
             dt: 1.0 / rate_hz,
-            last_sent: Setpoint::rest(*start),
+            last_sent: JointState::rest(*start),
             last_sent_tick: 0,
             trip: None,
             stop_plan: None,
@@ -339,7 +340,7 @@ where
         &mut self,
         k: u64,
         arm: Option<&ArmState>,
-    ) -> Result<(Phase, Setpoint), Outcome> {
+    ) -> Result<(Phase, JointState), Outcome> {
         let p = self.program;
         if let Some(trip) = self.trip {
             return self.stop_setpoint(k, trip).map(|sp| (Phase::Stop, sp));
@@ -358,7 +359,7 @@ where
             };
             return Ok((phase, p.playback[i as usize]));
         }
-        let settled_on = |goal: &Setpoint| {
+        let settled_on = |goal: &JointState| {
             arm.is_some_and(|a| {
                 a.q.iter().zip(goal.q.iter()).all(|(m, c)| (m - c).abs() <= p.settle_tolerance_rad)
             })
@@ -372,7 +373,7 @@ where
                 let settle_ticks = k - p.playback_end();
                 if !settled && settle_ticks < p.settle_max_ticks {
                     let phase = if p.lead_out_ticks > 0 { Phase::LeadOut } else { Phase::Settle };
-                    return Ok((phase, Setpoint::rest(goal.q)));
+                    return Ok((phase, JointState::rest(goal.q)));
                 }
                 if p.retreat.is_empty() {
                     return Err(Outcome::Completed { ticks: k, settled, at_rest: None });
@@ -391,11 +392,11 @@ where
         if at_rest || (i - p.retreat.len()) as u64 >= p.settle_max_ticks {
             return Err(Outcome::Completed { ticks: k, settled, at_rest: Some(at_rest) });
         }
-        Ok((Phase::Retreat, Setpoint::rest(rest.q)))
+        Ok((Phase::Retreat, JointState::rest(rest.q)))
     }
 
     /// The stop's setpoint for tick `k`: from the plan, a bridge until it arrives, or the end.
-    fn stop_setpoint(&mut self, k: u64, trip: Trip) -> Result<Setpoint, Outcome> {
+    fn stop_setpoint(&mut self, k: u64, trip: Trip) -> Result<JointState, Outcome> {
         if self.stop_plan.is_none() {
             self.stop_plan = self.stop.poll();
         }
@@ -447,7 +448,7 @@ where
     }
 
     /// Apply the light level `light_lead_ticks` early, and fire the camera at capture ticks.
-    fn schedule_light_and_capture(&mut self, k: u64, now: u64, commanded: &Setpoint) {
+    fn schedule_light_and_capture(&mut self, k: u64, now: u64, commanded: &JointState) {
         let p = self.program;
         let first = p.approach_ticks();
         if let Some(j) = (k + p.light_lead_ticks).checked_sub(first) {
@@ -500,7 +501,7 @@ mod light_lead_tests {
     #[test]
     fn a_capture_sees_the_scheduled_level_once_the_lead_has_passed() {
         let p = Program {
-            approach: vec![Setpoint::rest([0.0; 7]); 3],
+            approach: vec![JointState::rest([0.0; 7]); 3],
             light: vec![0.2, 0.2, 0.6, 0.6, 1.0],
             light_lead_ticks: 2,
             ..Program::default()

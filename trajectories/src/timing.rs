@@ -35,6 +35,7 @@
 use crate::kinematics::{Joints, DOF};
 use crate::npz::{self, NpzError};
 use crate::trajectory::Trajectory;
+use hitl_hal::JointState;
 use serde::{Deserialize, Serialize};
 
 /// Default control rate, Hz.
@@ -104,21 +105,6 @@ pub struct SetpointTable {
     /// Ticks of lead-out after the last waypoint's tick, ending at rest (0 when the file ends at
     /// rest).
     pub lead_out_ticks: usize,
-}
-
-/// A commanded joint state (position, velocity, acceleration) in playback time.
-#[derive(Debug, Clone, Copy, PartialEq, Default)]
-pub struct JointState {
-    pub q: Joints,
-    pub qd: Joints,
-    pub qdd: Joints,
-}
-
-impl JointState {
-    /// True when velocity and acceleration are zero on every joint.
-    pub fn at_rest(&self) -> bool {
-        self.qd.iter().chain(self.qdd.iter()).all(|x| *x == 0.0)
-    }
 }
 
 impl SetpointTable {

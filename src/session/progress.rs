@@ -1,8 +1,8 @@
 //! The operator's view of a run while it plays: a progress bar on a terminal (tick, phase,
 //! interlock status), plain lines otherwise. Reads [`LoopStatus`] atomics; never touches the loop.
 
-use super::telemetry::LoopStatus;
-use super::tick::Program;
+use crate::control::tick::Program;
+use crate::telemetry::LoopStatus;
 use std::sync::atomic::Ordering;
 use std::time::Duration;
 

@@ -1,12 +1,20 @@
-//! What the tick hands out, and the status the progress display reads.
+//! What the tick hands out, and the status the progress display reads: the contract between the
+//! control loop (the producer) and everything downstream of it (the capture path, the recorder,
+//! the progress line). Neither side imports the other; both import this.
+//!
+//! [`trip`] holds the facts of a trip (what and when); what a trip means for motion and for the
+//! exit code is the interlocks' business (`control::interlocks`).
 //!
 //! The tick calls a [`TelemetrySink`] with small `Copy` messages; a sink must never block or
 //! allocate (bounded lock-free queues that drop and count when full). [`LoopStatus`] is a set of
 //! atomics for the operator's progress line.
 
-use super::interlocks::Trip;
-use super::setpoint::{Phase, Setpoint};
+mod trip;
+
+pub use trip::{Device, Trip, TripKind};
+
 use hitl_hal::{ArmState, FireReport, RgbdFrame};
+use hitl_hal::{JointState, Phase};
 use std::sync::atomic::{AtomicBool, AtomicU64, AtomicU8, Ordering};
 
 /// `/arm/setpoint`.
@@ -15,7 +23,7 @@ pub struct SetpointOut {
     pub tick: u64,
     pub t_ns: u64,
     pub phase: Phase,
-    pub setpoint: Setpoint,
+    pub setpoint: JointState,
 }
 
 /// `/loop/timing`.
@@ -36,7 +44,7 @@ pub struct CaptureOut {
     /// Index of the capture in the run (0, 1, ...).
     pub index: u32,
     /// The setpoint commanded at the capture tick.
-    pub commanded: Setpoint,
+    pub commanded: JointState,
     pub light_level: f32,
 }
 

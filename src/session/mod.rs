@@ -3,7 +3,7 @@
 //! capture path (recorder, perception, frame intake); connect the arm, identify it, enable it;
 //! plan the approach and the retreat around the lab's obstacles; play on the real-time thread;
 //! stop the devices; close the capture path and the recording. Everything that allocates or
-//! blocks happens here, before or after the loop; the loop itself is [`super::tick`], which
+//! blocks happens here, before or after the loop; the loop itself is [`crate::control::tick`], which
 //! borrows the devices this module owns.
 //!
 //! - [`prepare`]: load, time-parametrise and preflight; plan the approach and the retreat, checked
@@ -11,7 +11,8 @@
 //! - [`arm_link`]: the arm's address, identity, report reader, first report, the embedded stub;
 //! - [`devices`]: the target scene, the recorder, late frames (the devices themselves are opened
 //!   by `crate::devices`, which is the only place that names drivers);
-//! - [`operator`]: what Ctrl-C does.
+//! - [`operator`]: what Ctrl-C does;
+//! - [`progress`]: the operator's progress line, read from the loop's status atomics.
 //!
 //! The run owns one tokio runtime for its whole life: the serial drivers' I/O tasks and the
 //! perception forwarder live on it, from opening until the devices are stopped after the loop.
@@ -20,6 +21,7 @@ mod arm_link;
 mod devices;
 mod operator;
 mod prepare;
+mod progress;
 
 use crate::capture::intake::{Intake, IntakeMask, IntakeOutputs, IntakeStats};
 use crate::capture::mask::{MaskDrawer, MaskSource};
@@ -28,10 +30,8 @@ use crate::capture::truth::LabFrames;
 use crate::control::interlocks::{Interlocks, Thresholds};
 use crate::control::motion::MoveLimits;
 use crate::control::planned_move::PlannedMove;
-use crate::control::setpoint::Setpoint;
 use crate::control::stop::StopPlanner;
 use crate::control::stop_supervisor::StopConfirmation;
-use crate::control::telemetry::LoopStatus;
 use crate::control::tick::{ControlLoop, Devices, Health, LoopIo, Outcome, Program};
 use crate::devices::arm::{ClientConfig, ReportKind, RunArm, ServoReplies, COMMAND_PORT};
 #[cfg(feature = "stub")]
@@ -40,8 +40,10 @@ use crate::devices::{self as run_devices, CameraSpec, DeviceChoice, DeviceError,
 use crate::devices::{LightSpec, TriggerSpec};
 use crate::exit;
 use crate::rt::{self, slot::LatestSlot, slot::SlotReader, RtOptions};
+use crate::telemetry::LoopStatus;
 use arm_link::{connect_reports, first_report, resolve, spawn_report_reader};
 use devices::{collect_late_frames, start_live, start_recorder, target_scene, TargetScene};
+use hitl_hal::JointState;
 use hitl_hal::{Arm, ArmState, Joints, MonotonicClock};
 use hitl_perception::{backend_from_spec, spawn_worker, BackendSpec, ReregisterPolicy};
 use hitl_record::{
@@ -729,7 +731,7 @@ fn build_program(
     }
     let program = Program {
         playback: (0..table.ticks())
-            .map(|k| Setpoint { q: table.q[k], qd: table.qd[k], qdd: table.qdd[k] })
+            .map(|k| JointState { q: table.q[k], qd: table.qd[k], qdd: table.qdd[k] })
             .collect(),
         capture,
         light: table.light.clone().unwrap_or_default(),
@@ -847,7 +849,7 @@ fn play(
                 (outcome, rt_report)
             })
             .map_err(|e| RunError::Device(format!("real-time thread: {e}")))?;
-        super::progress::follow(&status, program, req.plain_progress);
+        progress::follow(&status, program, req.plain_progress);
         rt_thread.join().map_err(|_| RunError::Device("the real-time thread panicked".into()))
     })?;
     drop(planner);
