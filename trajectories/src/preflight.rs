@@ -18,6 +18,10 @@
 //! is bolted there; its hemispherical end reaches below the base plate by construction). Every
 //! other capsule is checked against every surface, and the base capsule against the walls,
 //! ceiling and keep-outs (a lab config that puts the base too near a wall is refused too).
+//! Each rule is its own function over the setpoint profile ([`Ticks`]): `joint_limit_rule`,
+//! `joint_derivative_rule`, `tcp_speed_rule` and `clearance_rule`; `check_ticks` runs them in
+//! that order (one forward-kinematics pass feeds the last two).
+//!
 //! See `docs/preflight.md`.
 
 use crate::geometry::Capsule;
@@ -422,196 +426,282 @@ struct RuleResults {
     violations: Vec<Violation>,
 }
 
+/// Where a tick lies, for the rules' messages: its time, its waypoint segment and, in words,
+/// its place in the table.
+struct Locator<'a> {
+    ticks: &'a Ticks<'a>,
+    waypoint_of: &'a dyn Fn(usize) -> usize,
+    place: &'a dyn Fn(usize) -> String,
+}
+
+impl Locator<'_> {
+    /// A violation of `rule` worst at `tick`; `joint`, `surface`, `capsule` say what broke it.
+    fn violation(
+        &self,
+        rule: Rule,
+        message: String,
+        tick: usize,
+        joint: Option<usize>,
+        surface: Option<String>,
+        capsule: Option<String>,
+    ) -> Violation {
+        Violation {
+            rule,
+            message,
+            tick,
+            time_s: self.ticks.time_of(tick),
+            waypoint: (self.waypoint_of)(tick),
+            joint,
+            surface,
+            capsule,
+        }
+    }
+}
+
 /// Every rule over `table`'s ticks: `waypoint_of` says which waypoint segment a tick lies in,
-/// `place` where it is, in words.
+/// `place` where it is, in words. Violations come joint by joint (limit, then derivatives),
+/// then TCP speed, then clearances.
 fn check_ticks(
     table: &Ticks<'_>,
     lab: &LabConfig,
     waypoint_of: &dyn Fn(usize) -> usize,
     place: &dyn Fn(usize) -> String,
 ) -> RuleResults {
+    let at = Locator { ticks: table, waypoint_of, place };
     let mut violations = Vec::new();
-
-    // Joint rules.
-    let mut joints = Vec::with_capacity(DOF);
-    let margin = lab.margins.joint_limit_rad;
-    let joint_table = lab.arm.joint_table;
-    let table_limits = joint_table.limits();
-    for j in 0..DOF {
-        let (lo, hi) = (table_limits[j].0 + margin, table_limits[j].1 - margin);
-        let (mut min, mut max) = ((f64::INFINITY, 0), (f64::NEG_INFINITY, 0));
-        let mut worst_out = (0.0f64, 0usize);
-        let peak = |x: &[[f64; DOF]]| {
-            x.iter().enumerate().fold((0.0f64, 0usize), |(m, at), (k, v)| {
-                if v[j].is_nan() || v[j].abs() > m {
-                    (v[j].abs(), k)
-                } else {
-                    (m, at)
-                }
-            })
-        };
-        let mut step = (0.0f64, 0usize);
-        for (k, q) in table.q.iter().enumerate() {
-            let v = q[j];
-            if v < min.0 {
-                min = (v, k);
-            }
-            if v > max.0 {
-                max = (v, k);
-            }
-            let out = if v.is_nan() { f64::INFINITY } else { (lo - v).max(v - hi) };
-            if out > worst_out.0 {
-                worst_out = (out, k);
-            }
-            if k > 0 {
-                let s = (v - table.q[k - 1][j]).abs();
-                if s.is_nan() || s > step.0 {
-                    step = (s, k);
-                }
-            }
-        }
-        let (vel, vel_at) = peak(table.qd);
-        let (acc, acc_at) = peak(table.qdd);
-        let (jerk, jerk_at) = peak(table.jerk);
-        let limits = &lab.limits;
-        let joint = j + 1;
-        let mut violate = |rule: Rule, message: String, tick: usize| {
-            violations.push(Violation {
-                rule,
-                message,
-                tick,
-                time_s: table.time_of(tick),
-                waypoint: waypoint_of(tick),
-                joint: Some(joint),
-                surface: None,
-                capsule: None,
-            });
-        };
-        if worst_out.0 > 0.0 {
-            let k = worst_out.1;
-            violate(
-                Rule::JointLimit,
-                format!(
-                    "joint {joint} reaches {:.4} rad at tick {k} ({:.3} s, {}): \
-                     outside its allowed range [{lo:.4}, {hi:.4}] rad (joint table \
-                     {joint_table} less a {margin} rad margin)",
-                    table.q[k][j],
-                    table.time_of(k),
-                    place(k)
-                ),
-                k,
-            );
-        }
-        let mut over = |rule: Rule, what: &str, unit: &str, peak: f64, at: usize, limit: f64| {
-            if peak.is_nan() || peak > limit {
-                violate(
-                    rule,
-                    format!(
-                        "joint {joint} {what} {peak:.4} {unit} at tick {at} ({:.3} s, {}) \
-                         exceeds the limit {limit} {unit}",
-                        table.time_of(at),
-                        place(at)
-                    ),
-                    at,
-                );
-            }
-        };
-        over(Rule::Velocity, "velocity", "rad/s", vel, vel_at, limits.velocity_rad_s[j]);
-        over(
-            Rule::Acceleration,
-            "acceleration",
-            "rad/s^2",
-            acc,
-            acc_at,
-            limits.acceleration_rad_s2[j],
-        );
-        over(Rule::Jerk, "jerk", "rad/s^3", jerk, jerk_at, limits.jerk_rad_s3[j]);
-        over(
-            Rule::Step,
-            &format!("step between setpoints at {} Hz", table.rate_hz),
-            "rad",
-            step.0,
-            step.1,
-            limits.max_step_rad,
-        );
-        joints.push(JointPeaks {
-            joint,
-            min_rad: min.0,
-            max_rad: max.0,
-            allowed_min_rad: lo,
-            allowed_max_rad: hi,
-            peak_velocity: vel,
-            velocity_limit: limits.velocity_rad_s[j],
-            peak_acceleration: acc,
-            acceleration_limit: limits.acceleration_rad_s2[j],
-            peak_jerk: jerk,
-            jerk_limit: limits.jerk_rad_s3[j],
-            peak_step_rad: step.0,
-            step_limit_rad: limits.max_step_rad,
-        });
-    }
-
-    // Clearance rules, every tick.
+    let joints = (0..DOF)
+        .map(|j| {
+            let range = joint_limit_rule(table, lab, j, &at, &mut violations);
+            joint_derivative_rule(table, lab, j, range, &at, &mut violations)
+        })
+        .collect();
+    // One forward-kinematics pass feeds both pose rules.
     let obstacles = Obstacles::new(lab);
-    let mut faces = [MinTrack::NONE; 6];
-    let mut keep = [MinTrack::NONE; 3];
-    let mut camera = MinTrack::NONE;
-    // TCP speed: (peak, tick, point 0 flange / 1 camera) and the previous tick's positions.
-    let mut tcp = (0.0f64, 0usize, 0usize);
-    let mut previous: Option<[Point3<f64>; 2]> = None;
+    let mut tcp = TcpTrack::default();
+    let mut nearest = NearestTrack::default();
     for (k, q) in table.q.iter().enumerate() {
         let pose = obstacles.at(q);
-        if let Some(prev) = previous {
+        tcp.offer(k, &pose, table.rate_hz);
+        nearest.offer(k, &pose);
+    }
+    let tcp_speed = tcp_speed_rule(&tcp, lab, &at, &mut violations);
+    let clearances = clearance_rule(&nearest, &obstacles, lab, &at, &mut violations);
+    RuleResults { joints, clearances, tcp_speed, violations }
+}
+
+/// Joint `j`'s lowest and highest setpoint against its allowed range.
+struct JointRange {
+    min_rad: f64,
+    max_rad: f64,
+    allowed_min_rad: f64,
+    allowed_max_rad: f64,
+}
+
+/// Rule: joint `j` stays inside the lab's joint-limit table shrunk by the margin.
+fn joint_limit_rule(
+    table: &Ticks<'_>,
+    lab: &LabConfig,
+    j: usize,
+    at: &Locator<'_>,
+    violations: &mut Vec<Violation>,
+) -> JointRange {
+    let margin = lab.margins.joint_limit_rad;
+    let joint_table = lab.arm.joint_table;
+    let limits = joint_table.limits()[j];
+    let (lo, hi) = (limits.0 + margin, limits.1 - margin);
+    let (mut min, mut max) = (f64::INFINITY, f64::NEG_INFINITY);
+    let mut worst_out = (0.0f64, 0usize);
+    for (k, q) in table.q.iter().enumerate() {
+        let v = q[j];
+        min = if v < min { v } else { min };
+        max = if v > max { v } else { max };
+        let out = if v.is_nan() { f64::INFINITY } else { (lo - v).max(v - hi) };
+        if out > worst_out.0 {
+            worst_out = (out, k);
+        }
+    }
+    if worst_out.0 > 0.0 {
+        let k = worst_out.1;
+        let joint = j + 1;
+        let message = format!(
+            "joint {joint} reaches {:.4} rad at tick {k} ({:.3} s, {}): outside its allowed \
+             range [{lo:.4}, {hi:.4}] rad (joint table {joint_table} less a {margin} rad margin)",
+            table.q[k][j],
+            table.time_of(k),
+            (at.place)(k)
+        );
+        violations.push(at.violation(Rule::JointLimit, message, k, Some(joint), None, None));
+    }
+    JointRange { min_rad: min, max_rad: max, allowed_min_rad: lo, allowed_max_rad: hi }
+}
+
+/// The largest |x[k][j]| over the ticks and where (a NaN is taken and kept).
+fn peak_of(x: &[Joints], j: usize) -> (f64, usize) {
+    x.iter().enumerate().fold((0.0f64, 0usize), |(m, at), (k, v)| {
+        if v[j].is_nan() || v[j].abs() > m {
+            (v[j].abs(), k)
+        } else {
+            (m, at)
+        }
+    })
+}
+
+/// The largest change of joint `j` between two setpoints and where (the later tick).
+fn peak_step(q: &[Joints], j: usize) -> (f64, usize) {
+    let mut step = (0.0f64, 0usize);
+    for k in 1..q.len() {
+        let s = (q[k][j] - q[k - 1][j]).abs();
+        if s.is_nan() || s > step.0 {
+            step = (s, k);
+        }
+    }
+    step
+}
+
+/// Rule: joint `j`'s peak velocity, acceleration, jerk and per-tick step stay within `limits`.
+fn joint_derivative_rule(
+    table: &Ticks<'_>,
+    lab: &LabConfig,
+    j: usize,
+    range: JointRange,
+    at: &Locator<'_>,
+    violations: &mut Vec<Violation>,
+) -> JointPeaks {
+    let limits = &lab.limits;
+    let joint = j + 1;
+    let (vel, vel_at) = peak_of(table.qd, j);
+    let (acc, acc_at) = peak_of(table.qdd, j);
+    let (jerk, jerk_at) = peak_of(table.jerk, j);
+    let step = peak_step(table.q, j);
+    let mut over = |rule: Rule, what: &str, unit: &str, (peak, k): (f64, usize), limit: f64| {
+        if peak.is_nan() || peak > limit {
+            let message = format!(
+                "joint {joint} {what} {peak:.4} {unit} at tick {k} ({:.3} s, {}) exceeds the \
+                 limit {limit} {unit}",
+                table.time_of(k),
+                (at.place)(k)
+            );
+            violations.push(at.violation(rule, message, k, Some(joint), None, None));
+        }
+    };
+    over(Rule::Velocity, "velocity", "rad/s", (vel, vel_at), limits.velocity_rad_s[j]);
+    let acc_limit = limits.acceleration_rad_s2[j];
+    over(Rule::Acceleration, "acceleration", "rad/s^2", (acc, acc_at), acc_limit);
+    over(Rule::Jerk, "jerk", "rad/s^3", (jerk, jerk_at), limits.jerk_rad_s3[j]);
+    let what = format!("step between setpoints at {} Hz", table.rate_hz);
+    over(Rule::Step, &what, "rad", step, limits.max_step_rad);
+    JointPeaks {
+        joint,
+        min_rad: range.min_rad,
+        max_rad: range.max_rad,
+        allowed_min_rad: range.allowed_min_rad,
+        allowed_max_rad: range.allowed_max_rad,
+        peak_velocity: vel,
+        velocity_limit: limits.velocity_rad_s[j],
+        peak_acceleration: acc,
+        acceleration_limit: acc_limit,
+        peak_jerk: jerk,
+        jerk_limit: limits.jerk_rad_s3[j],
+        peak_step_rad: step.0,
+        step_limit_rad: limits.max_step_rad,
+    }
+}
+
+/// The running peak of the TCP's linear speed: (peak, tick, point 0 flange / 1 camera), and
+/// the previous tick's positions.
+#[derive(Default)]
+struct TcpTrack {
+    peak: (f64, usize, usize),
+    previous: Option<[Point3<f64>; 2]>,
+}
+
+impl TcpTrack {
+    fn offer(&mut self, k: usize, pose: &PoseClearances, rate_hz: f64) {
+        if let Some(prev) = self.previous {
             for (i, (p, before)) in pose.points.iter().zip(prev).enumerate() {
-                let v = (p - before).norm() * table.rate_hz;
-                if v.is_nan() || v > tcp.0 {
-                    tcp = (v, k, i);
+                let v = (p - before).norm() * rate_hz;
+                if v.is_nan() || v > self.peak.0 {
+                    self.peak = (v, k, i);
                 }
             }
         }
-        previous = Some(pose.points);
-        for (track, (d, c)) in faces.iter_mut().zip(pose.faces) {
-            track.offer(d, k, c);
-        }
-        for (track, (d, c)) in keep.iter_mut().zip(pose.keepouts) {
-            track.offer(d, k, c);
-        }
-        camera.offer(pose.camera_target_m, k, CAPSULE_NAMES.len() - 1);
+        self.previous = Some(pose.points);
     }
+}
+
+/// Rule: the flange's and the camera's linear speed stay within `limits.tcp_speed_m_s`.
+fn tcp_speed_rule(
+    track: &TcpTrack,
+    lab: &LabConfig,
+    at: &Locator<'_>,
+    violations: &mut Vec<Violation>,
+) -> TcpSpeed {
+    let (peak, k, point) = track.peak;
     let tcp_speed = TcpSpeed {
-        peak_m_s: tcp.0,
-        point: ["flange", "camera"][tcp.2].to_string(),
-        tick: tcp.1,
-        time_s: table.time_of(tcp.1),
+        peak_m_s: peak,
+        point: ["flange", "camera"][point].to_string(),
+        tick: k,
+        time_s: at.ticks.time_of(k),
         limit_m_s: lab.limits.tcp_speed_m_s,
     };
     if tcp_speed.peak_m_s.is_nan() || tcp_speed.peak_m_s > tcp_speed.limit_m_s {
-        let k = tcp_speed.tick;
-        violations.push(Violation {
-            rule: Rule::TcpSpeed,
-            message: format!(
-                "TCP linear speed {:.3} m/s ({}) at tick {k} ({:.3} s, {}) exceeds \
-                 limits.tcp_speed_m_s = {} m/s (the control box stops servo_j with error 60 \
-                 above {} m/s)",
-                tcp_speed.peak_m_s,
-                tcp_speed.point,
-                tcp_speed.time_s,
-                place(k),
-                tcp_speed.limit_m_s,
-                crate::lab::SERVO_J_TCP_SPEED_LIMIT
-            ),
-            tick: k,
-            time_s: tcp_speed.time_s,
-            waypoint: waypoint_of(k),
-            joint: None,
-            surface: None,
-            capsule: Some(tcp_speed.point.clone()),
-        });
+        let message = format!(
+            "TCP linear speed {:.3} m/s ({}) at tick {k} ({:.3} s, {}) exceeds \
+             limits.tcp_speed_m_s = {} m/s (the control box stops servo_j with error 60 \
+             above {} m/s)",
+            tcp_speed.peak_m_s,
+            tcp_speed.point,
+            tcp_speed.time_s,
+            (at.place)(k),
+            tcp_speed.limit_m_s,
+            crate::lab::SERVO_J_TCP_SPEED_LIMIT
+        );
+        let capsule = Some(tcp_speed.point.clone());
+        violations.push(at.violation(Rule::TcpSpeed, message, k, None, None, capsule));
     }
+    tcp_speed
+}
+
+/// The running minimum of every clearance: per enclosure face, per keep-out, and the camera to
+/// the target.
+struct NearestTrack {
+    faces: [MinTrack; 6],
+    keepouts: [MinTrack; 3],
+    camera: MinTrack,
+}
+
+impl Default for NearestTrack {
+    fn default() -> Self {
+        Self { faces: [MinTrack::NONE; 6], keepouts: [MinTrack::NONE; 3], camera: MinTrack::NONE }
+    }
+}
+
+impl NearestTrack {
+    fn offer(&mut self, k: usize, pose: &PoseClearances) {
+        for (track, (d, c)) in self.faces.iter_mut().zip(pose.faces) {
+            track.offer(d, k, c);
+        }
+        for (track, (d, c)) in self.keepouts.iter_mut().zip(pose.keepouts) {
+            track.offer(d, k, c);
+        }
+        self.camera.offer(pose.camera_target_m, k, CAPSULE_NAMES.len() - 1);
+    }
+}
+
+/// Rule: every capsule keeps `margins.wall_m` from each enclosure face and `margins.keepout_m`
+/// from each keep-out, and the camera stays `camera.min_target_distance_m` from the target.
+fn clearance_rule(
+    nearest: &NearestTrack,
+    obstacles: &Obstacles,
+    lab: &LabConfig,
+    at: &Locator<'_>,
+    violations: &mut Vec<Violation>,
+) -> Vec<Clearance> {
     let mut clearances = Vec::with_capacity(10);
     let mut add = |surface: String, track: MinTrack, required: f64, rule: Rule| {
         let capsule = CAPSULE_NAMES[track.capsule].to_string();
         let k = track.tick;
+        let time_s = at.ticks.time_of(k);
         if track.value.is_nan() || track.value < required {
             let what = if rule == Rule::CameraTargetDistance {
                 format!(
@@ -624,45 +714,30 @@ fn check_ticks(
                     track.value
                 )
             };
-            violations.push(Violation {
-                rule,
-                message: format!("{what} at tick {k} ({:.3} s, {})", table.time_of(k), place(k)),
-                tick: k,
-                time_s: table.time_of(k),
-                waypoint: waypoint_of(k),
-                joint: None,
-                surface: Some(surface.clone()),
-                capsule: Some(capsule.clone()),
-            });
+            let message = format!("{what} at tick {k} ({time_s:.3} s, {})", (at.place)(k));
+            let (s, c) = (Some(surface.clone()), Some(capsule.clone()));
+            violations.push(at.violation(rule, message, k, None, s, c));
         }
         clearances.push(Clearance {
             surface,
             min_m: track.value,
             required_m: required,
             tick: k,
-            time_s: table.time_of(k),
+            time_s,
             capsule,
         });
     };
-    for (f, track) in faces.iter().enumerate() {
+    for (f, track) in nearest.faces.iter().enumerate() {
         add(FACE_NAMES[f].to_string(), *track, lab.margins.wall_m, Rule::Wall);
     }
-    for (i, track) in keep.iter().enumerate() {
-        add(
-            format!("keep-out {}", obstacles.keepouts[i].0),
-            *track,
-            lab.margins.keepout_m,
-            Rule::KeepOut,
-        );
+    for (i, track) in nearest.keepouts.iter().enumerate() {
+        let surface = format!("keep-out {}", obstacles.keepouts[i].0);
+        add(surface, *track, lab.margins.keepout_m, Rule::KeepOut);
     }
-    add(
-        "camera-target distance".into(),
-        camera,
-        lab.camera.min_target_distance_m,
-        Rule::CameraTargetDistance,
-    );
-
-    RuleResults { joints, clearances, tcp_speed, violations }
+    let camera = nearest.camera;
+    let required = lab.camera.min_target_distance_m;
+    add("camera-target distance".into(), camera, required, Rule::CameraTargetDistance);
+    clearances
 }
 
 /// Rules a slower playback always cures: per joint, velocity scales with the speed scale `s`,
