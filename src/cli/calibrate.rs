@@ -218,11 +218,30 @@ fn calibrate(args: CalibrateArgs) -> Result<(), Refusal> {
     let cov_z = sol.covariance.fixed_view::<6, 6>(6, 6).into_owned();
     let target_sigma =
         solve::composed_sigma(&cov_z, &sol.board_in_base, &board_in_target.inverse());
+    report_solution(&sol, &target_in_base, &target_sigma, &lab);
+
+    // 5. The calibrated lab, written atomically.
+    let found =
+        Found { placement: &placement, board: &board, sol: &sol, target_in_base, target_sigma };
+    let text = calibrated_lab(&args, &lab, &found)?;
+    write_atomic(&out, text.as_bytes())?;
+    crate::outln!("calibrated lab configuration: {}", out.display());
+    Ok(())
+}
+
+/// Print the solution: per-view and overall reprojection, and how far the camera mount and the
+/// target moved from the lab's nominal poses.
+fn report_solution(
+    sol: &solve::Solution,
+    target_in_base: &hitl_hal::Pose,
+    target_sigma: &solve::Sigma,
+    lab: &LabConfig,
+) {
     for (i, r) in sol.view_rms_px.iter().enumerate() {
         crate::outln!("view {:2}: {:.3} px RMS", i + 1, r);
     }
     let (dcam_t, dcam_r) = solve::pose_difference(&sol.camera_mount, &lab.camera_mount());
-    let (dtgt_t, dtgt_r) = solve::pose_difference(&target_in_base, &lab.target_in_base());
+    let (dtgt_t, dtgt_r) = solve::pose_difference(target_in_base, &lab.target_in_base());
     crate::outln!(
         "reprojection {:.3} px RMS over {} corners in {} views ({} LM iterations)",
         sol.rms_px,
@@ -244,14 +263,30 @@ fn calibrate(args: CalibrateArgs) -> Result<(), Refusal> {
         dtgt_t * 1e3,
         dtgt_r
     );
+}
 
-    // 5. The calibrated lab, written atomically.
+/// What the solve found, for the calibrated lab.
+struct Found<'a> {
+    placement: &'a BoardPlacement,
+    board: &'a Board,
+    sol: &'a solve::Solution,
+    target_in_base: hitl_hal::Pose,
+    target_sigma: solve::Sigma,
+}
+
+/// The calibrated lab's text: `lab` with the solved camera mount and target pose, the board and
+/// the calibration's provenance; refused when the result is not a valid lab.
+fn calibrated_lab(
+    args: &CalibrateArgs,
+    lab: &LabConfig,
+    found: &Found<'_>,
+) -> Result<String, Refusal> {
     let mut calibrated = lab.clone();
-    calibrated.board = Some(placement.clone());
-    let (t, rpy) = parts(&sol.camera_mount);
+    calibrated.board = Some(found.placement.clone());
+    let (t, rpy) = parts(&found.sol.camera_mount);
     calibrated.camera.translation_m = t;
     calibrated.camera.rpy_deg = rpy;
-    let (t, rpy) = parts(&target_in_base);
+    let (t, rpy) = parts(&found.target_in_base);
     calibrated.target.position_base_m = t;
     calibrated.target.rpy_deg = rpy;
     calibrated.calibration = Some(CalibrationProvenance {
@@ -259,14 +294,14 @@ fn calibrate(args: CalibrateArgs) -> Result<(), Refusal> {
         method: "hitl calibrate: kornia-apriltag corners, per-view homography pose, Shah's \
                  robot-world-hand-eye closed form, joint Levenberg-Marquardt on reprojection error"
             .into(),
-        board: board.describe(),
-        views: sol.view_rms_px.len() as u32,
-        rms_px: round(sol.rms_px, 4),
-        view_rms_px: sol.view_rms_px.iter().map(|r| round(*r, 4)).collect(),
-        camera_sigma_mm: round(sol.camera_sigma.mm, 4),
-        camera_sigma_deg: round(sol.camera_sigma.deg, 5),
-        target_sigma_mm: round(target_sigma.mm, 4),
-        target_sigma_deg: round(target_sigma.deg, 5),
+        board: found.board.describe(),
+        views: found.sol.view_rms_px.len() as u32,
+        rms_px: round(found.sol.rms_px, 4),
+        view_rms_px: found.sol.view_rms_px.iter().map(|r| round(*r, 4)).collect(),
+        camera_sigma_mm: round(found.sol.camera_sigma.mm, 4),
+        camera_sigma_deg: round(found.sol.camera_sigma.deg, 5),
+        target_sigma_mm: round(found.target_sigma.mm, 4),
+        target_sigma_deg: round(found.target_sigma.deg, 5),
     });
     calibrated.validate().map_err(|e| {
         Refusal(exit::PREFLIGHT_REFUSED, format!("the calibrated lab is not valid: {e}"))
@@ -277,9 +312,58 @@ fn calibrate(args: CalibrateArgs) -> Result<(), Refusal> {
         args.labs.config.as_ref().map_or("the default lab".into(), |p| p.display().to_string()),
         calibrated.to_toml()
     );
-    write_atomic(&out, text.as_bytes())?;
-    crate::outln!("calibrated lab configuration: {}", out.display());
-    Ok(())
+    Ok(text)
+}
+
+/// The views' trajectory: planned in `lab_with_board`, each view solved and in view, and
+/// preflighted in the controller's `lab`; refused before anything moves if too few views are
+/// reachable or the preflight refuses them.
+fn planned_views(
+    args: &CalibrateArgs,
+    lab_with_board: &LabConfig,
+    lab: &LabConfig,
+    board: &Board,
+    k: &Intrinsics,
+) -> Result<hitl_trajectories::Trajectory, Refusal> {
+    let plan = ViewPlan { count: args.views, ..ViewPlan::default() };
+    let (planned, dropped) = views::plan_views(lab_with_board, board, k, &plan);
+    for d in &dropped {
+        crate::errln!("note: view {} dropped: {}", d.index + 1, d.reason);
+    }
+    if planned.len() < MIN_PLANNED_VIEWS {
+        return refuse(
+            TOO_FEW_VIEWS,
+            format!(
+                "only {} of {} views are reachable with the whole board in the image (at least \
+                 {MIN_PLANNED_VIEWS} are needed); nothing moved. Check the board's placement in \
+                 [board] and the target pose, or ask for more views (--views)",
+                planned.len(),
+                args.views
+            ),
+        );
+    }
+    let traj = views::trajectory(&planned, lab_with_board, &plan);
+    let table = SetpointTable::build(&traj, 250.0, 1.0)
+        .map_err(|e| Refusal(exit::BAD_INPUT, format!("timing the views' trajectory: {e}")))?;
+    let report = preflight::check(&traj, &table, lab);
+    if !report.is_safe() {
+        let lines: Vec<String> = report.violations.iter().map(|v| v.message.clone()).collect();
+        return refuse(
+            exit::PREFLIGHT_REFUSED,
+            format!(
+                "preflight refused the views' trajectory; nothing moved:\n{}",
+                lines.join("\n")
+            ),
+        );
+    }
+    crate::outln!(
+        "calibration: {} views of {}, {:.1} s of motion",
+        planned.len(),
+        board.describe(),
+        traj.duration()
+    );
+
+    Ok(traj)
 }
 
 /// Plans the views (refused before anything moves if too few are reachable with the board whole
@@ -317,47 +401,11 @@ fn play_views(
         stub_lab = Some(lab_with_board.clone());
     }
 
-    // 1. The views, each solved and in view; refused before anything moves if too few.
-    let plan = ViewPlan { count: args.views, ..ViewPlan::default() };
-    let (planned, dropped) = views::plan_views(&lab_with_board, board, k, &plan);
-    for d in &dropped {
-        crate::errln!("note: view {} dropped: {}", d.index + 1, d.reason);
-    }
-    if planned.len() < MIN_PLANNED_VIEWS {
-        return refuse(
-            TOO_FEW_VIEWS,
-            format!(
-                "only {} of {} views are reachable with the whole board in the image (at least \
-                 {MIN_PLANNED_VIEWS} are needed); nothing moved. Check the board's placement in \
-                 [board] and the target pose, or ask for more views (--views)",
-                planned.len(),
-                args.views
-            ),
-        );
-    }
-    let traj = views::trajectory(&planned, &lab_with_board, &plan);
+    // 1. The views, each solved and in view, preflighted; refused before anything moves.
+    let traj = planned_views(args, &lab_with_board, lab, board, k)?;
     let npz = dir.join("calibration-views.npz");
     hitl_trajectories::npz::save(&npz, &traj, true)
         .map_err(|e| Refusal(exit::BAD_INPUT, format!("writing the views' trajectory: {e}")))?;
-    let table = SetpointTable::build(&traj, 250.0, 1.0)
-        .map_err(|e| Refusal(exit::BAD_INPUT, format!("timing the views' trajectory: {e}")))?;
-    let report = preflight::check(&traj, &table, lab);
-    if !report.is_safe() {
-        let lines: Vec<String> = report.violations.iter().map(|v| v.message.clone()).collect();
-        return refuse(
-            exit::PREFLIGHT_REFUSED,
-            format!(
-                "preflight refused the views' trajectory; nothing moved:\n{}",
-                lines.join("\n")
-            ),
-        );
-    }
-    crate::outln!(
-        "calibration: {} views of {}, {:.1} s of motion",
-        planned.len(),
-        board.describe(),
-        traj.duration()
-    );
 
     // 2. Play them through the run session, recording the captures.
     let record = args.record.clone().unwrap_or_else(|| dir.join("calibration.mcap"));

@@ -8,13 +8,13 @@
 use crate::cli::reregister::ReregisterArgs;
 use crate::exit;
 use hitl_hal::Pose;
-use hitl_perception::estimator::BackendSpec;
 use hitl_perception::metrics::{evaluate_symmetric, frame_error, PosePair};
 use hitl_perception::models::Symmetry;
 use hitl_perception::replay::replay_frames;
 use hitl_perception::reregister::METADATA_KEY;
+use hitl_perception::BackendSpec;
 use hitl_perception::{backend_from_spec, ReregisterPolicy, Reregistering, TargetModel};
-use std::collections::HashMap;
+use std::collections::{BTreeMap, HashMap};
 use std::path::PathBuf;
 
 /// Score a recording's pose estimates against its ground truth.
@@ -177,56 +177,7 @@ fn eval(args: &EvalArgs) -> Result<serde_json::Value, String> {
     extra.insert("symmetry_source".into(), serde_json::json!(symmetry_source));
     let estimates: HashMap<u64, Pose> = match &args.backend {
         None => rec.pose_estimate.iter().map(|p| (p.capture_ns, p.pose)).collect(),
-        Some(b) => {
-            let spec: BackendSpec = b.parse().map_err(|e| format!("{e}"))?;
-            let target = target_spec.clone().unwrap_or_else(|| "asymmetric".to_string());
-            let model = TargetModel::from_spec(&target).map_err(|e| e.to_string())?;
-            let mut mesh = model.lab_mesh(scale).map_err(|e| e.to_string())?;
-            if let Some(n) = args.mesh_faces {
-                let d = hitl_perception::models::decimate::decimate(&mesh, n)
-                    .map_err(|e| format!("--mesh-faces {n}: {e}"))?;
-                extra.insert("mesh_faces".into(), serde_json::json!(d.mesh.faces().len()));
-                extra.insert("mesh_faces_before".into(), serde_json::json!(d.faces_before));
-                mesh = d.mesh;
-            }
-            let policy = if args.reregister.given() {
-                args.reregister.policy().map_err(|e| e.to_string())?
-            } else {
-                recorded_policy(run_meta, path)?
-            };
-            let est = backend_from_spec(&spec, &mesh)
-                .map_err(|e| e.to_string())?
-                .ok_or("--backend none has nothing to run")?;
-            let mut est = Reregistering::new(est, policy);
-            let mut out = HashMap::new();
-            let (mut errors, mut resets) = (0usize, 0u64);
-            let t0 = std::time::Instant::now();
-            let summary = replay_frames(path, |f| {
-                let (r, n) = est.estimate(&f);
-                resets += u64::from(n);
-                match r {
-                    Ok(e) => {
-                        if let Some(p) = e.pose {
-                            out.insert(f.timestamp_ns, p);
-                        }
-                    }
-                    Err(_) => errors += 1,
-                }
-            })
-            .map_err(|e| e.to_string())?;
-            let secs = t0.elapsed().as_secs_f64();
-            extra.insert("backend".into(), serde_json::json!(est.name()));
-            extra.insert("reregister".into(), serde_json::json!(policy));
-            extra.insert("backend_resets".into(), serde_json::json!(resets));
-            extra.insert("target".into(), serde_json::json!(target));
-            extra.insert("replayed_frames".into(), serde_json::json!(summary.frames));
-            extra.insert("backend_errors".into(), serde_json::json!(errors));
-            extra.insert(
-                "backend_fps".into(),
-                serde_json::json!(if secs > 0.0 { summary.frames as f64 / secs } else { 0.0 }),
-            );
-            out
-        }
+        Some(b) => rerun_backend(args, b, target_spec.as_deref(), scale, run_meta, &mut extra)?,
     };
     let pairs = pose_pairs(&rec.pose_gt, &estimates);
     let m = evaluate_symmetric(&pairs, scale, &symmetry).map_err(|e| e.to_string())?;
@@ -259,6 +210,68 @@ fn eval(args: &EvalArgs) -> Result<serde_json::Value, String> {
         crate::errln!("hitl eval: warning: {w}");
     }
     Ok(v)
+}
+
+/// Re-run the recording's frames through `--backend` `backend` (against `target_spec`'s mesh at
+/// `scale`, re-registered by the flags' or the recorded policy); the estimates by capture time.
+/// What the re-run was (backend, policy, frames, errors, speed) goes into `extra`.
+fn rerun_backend(
+    args: &EvalArgs,
+    backend: &str,
+    target_spec: Option<&str>,
+    scale: f64,
+    run_meta: Option<&BTreeMap<String, String>>,
+    extra: &mut serde_json::Map<String, serde_json::Value>,
+) -> Result<HashMap<u64, Pose>, String> {
+    let path = &args.recording;
+    let spec: BackendSpec = backend.parse().map_err(|e| format!("{e}"))?;
+    let target = target_spec.unwrap_or("asymmetric").to_string();
+    let model = TargetModel::from_spec(&target).map_err(|e| e.to_string())?;
+    let mut mesh = model.lab_mesh(scale).map_err(|e| e.to_string())?;
+    if let Some(n) = args.mesh_faces {
+        let d = hitl_perception::models::decimate::decimate(&mesh, n)
+            .map_err(|e| format!("--mesh-faces {n}: {e}"))?;
+        extra.insert("mesh_faces".into(), serde_json::json!(d.mesh.faces().len()));
+        extra.insert("mesh_faces_before".into(), serde_json::json!(d.faces_before));
+        mesh = d.mesh;
+    }
+    let policy = if args.reregister.given() {
+        args.reregister.policy().map_err(|e| e.to_string())?
+    } else {
+        recorded_policy(run_meta, path)?
+    };
+    let est = backend_from_spec(&spec, &mesh)
+        .map_err(|e| e.to_string())?
+        .ok_or("--backend none has nothing to run")?;
+    let mut est = Reregistering::new(est, policy);
+    let mut out = HashMap::new();
+    let (mut errors, mut resets) = (0usize, 0u64);
+    let t0 = std::time::Instant::now();
+    let summary = replay_frames(path, |f| {
+        let (r, n) = est.estimate(&f);
+        resets += u64::from(n);
+        match r {
+            Ok(e) => {
+                if let Some(p) = e.pose {
+                    out.insert(f.timestamp_ns, p);
+                }
+            }
+            Err(_) => errors += 1,
+        }
+    })
+    .map_err(|e| e.to_string())?;
+    let secs = t0.elapsed().as_secs_f64();
+    extra.insert("backend".into(), serde_json::json!(est.name()));
+    extra.insert("reregister".into(), serde_json::json!(policy));
+    extra.insert("backend_resets".into(), serde_json::json!(resets));
+    extra.insert("target".into(), serde_json::json!(target));
+    extra.insert("replayed_frames".into(), serde_json::json!(summary.frames));
+    extra.insert("backend_errors".into(), serde_json::json!(errors));
+    extra.insert(
+        "backend_fps".into(),
+        serde_json::json!(if secs > 0.0 { summary.frames as f64 / secs } else { 0.0 }),
+    );
+    Ok(out)
 }
 
 /// The symmetry the `_sym` figures are taken up to, and where it came from: `flag`

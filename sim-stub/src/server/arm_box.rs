@@ -335,6 +335,29 @@ impl ArmBox {
         self.commands += 1;
         let mut data = [0u8; MAX_REPLY_DATA];
         let mut invalid = false;
+        let len = if let Some(len) = self.query(register, params, &mut data) {
+            len
+        } else if self.command(register, params, now_s, &mut invalid) {
+            0
+        } else {
+            if self.unknown_registers.len() < 32 && !self.unknown_registers.contains(&register) {
+                self.unknown_registers.push(register);
+            }
+            // Warning 13, "command does not exist"; the reply also says invalid.
+            self.warn = codes::WARN_NO_SUCH_COMMAND;
+            invalid = true;
+            0
+        };
+        let mut state = self.state_byte();
+        if invalid {
+            state |= reg::STATE_INVALID;
+        }
+        BoxReply { state, len, data }
+    }
+
+    /// A report register: writes its reply into `data` and gives the reply's length; `None`
+    /// when `register` is not a report.
+    fn query(&self, register: u8, params: &[u8], data: &mut [u8; MAX_REPLY_DATA]) -> Option<usize> {
         let len = match register {
             reg::GET_VERSION => {
                 let v = self.version_text.as_bytes();
@@ -353,42 +376,6 @@ impl ArmBox {
             | reg::GET_ALLOW_APPROX_MOTION
             | reg::GET_SAFE_LEVEL => 1,
             reg::GET_HD_TYPES => 2,
-            reg::MOTION_EN => {
-                match params {
-                    [axis @ 1..=8, en @ (0 | 1)] => {
-                        if *en == 0 {
-                            self.enabled = false;
-                        } else if *axis == 8 && !self.estop {
-                            self.enabled = true;
-                        }
-                        self.system_reset();
-                    }
-                    _ => invalid = true,
-                }
-                0
-            }
-            reg::SET_STATE => {
-                match params {
-                    [arm_state::START] => {
-                        if self.enabled && self.error == 0 {
-                            if !matches!(self.state, arm_state::MOVING | arm_state::SLEEPING) {
-                                self.hold();
-                                self.last_servo_s = None;
-                            }
-                            self.state = arm_state::SLEEPING;
-                        }
-                    }
-                    [arm_state::PAUSED] => {
-                        if self.ready() {
-                            self.state = arm_state::PAUSED;
-                            self.hold();
-                        }
-                    }
-                    [arm_state::STOPPED] => self.system_reset(),
-                    _ => invalid = true,
-                }
-                0
-            }
             reg::GET_STATE => {
                 data[0] = self.state;
                 1
@@ -399,6 +386,61 @@ impl ArmBox {
                 data[1] = self.warn;
                 2
             }
+            reg::GET_TCP_POSE => put_f32s(data, &tcp_pose(&self.reported_joints())),
+            reg::GET_JOINT_POS => {
+                let q = self.reported_joints();
+                match params.first().map(|n| n & 0x0F) {
+                    None | Some(0 | 1) => put_f32s(data, &q),
+                    Some(n) => {
+                        let mut at = put_f32s(data, &q);
+                        at += put_f32s(&mut data[at..], &self.plant.velocities());
+                        if n >= 3 {
+                            at += put_f32s(&mut data[at..], &[0.0; DOF]);
+                        }
+                        at
+                    }
+                }
+            }
+            reg::GET_JOINT_TAU => put_f32s(data, &[0.0; DOF]),
+            _ => return None,
+        };
+        Some(len)
+    }
+
+    /// A command register: changes the box's state (`invalid` when its parameters are wrong);
+    /// false when `register` is not a command.
+    fn command(&mut self, register: u8, params: &[u8], now_s: f64, invalid: &mut bool) -> bool {
+        match register {
+            reg::MOTION_EN => match params {
+                [axis @ 1..=8, en @ (0 | 1)] => {
+                    if *en == 0 {
+                        self.enabled = false;
+                    } else if *axis == 8 && !self.estop {
+                        self.enabled = true;
+                    }
+                    self.system_reset();
+                }
+                _ => *invalid = true,
+            },
+            reg::SET_STATE => match params {
+                [arm_state::START] => {
+                    if self.enabled && self.error == 0 {
+                        if !matches!(self.state, arm_state::MOVING | arm_state::SLEEPING) {
+                            self.hold();
+                            self.last_servo_s = None;
+                        }
+                        self.state = arm_state::SLEEPING;
+                    }
+                }
+                [arm_state::PAUSED] => {
+                    if self.ready() {
+                        self.state = arm_state::PAUSED;
+                        self.hold();
+                    }
+                }
+                [arm_state::STOPPED] => self.system_reset(),
+                _ => *invalid = true,
+            },
             reg::CLEAN_ERR => {
                 if params.is_empty() {
                     if !self.estop {
@@ -406,17 +448,15 @@ impl ArmBox {
                     }
                     self.system_reset();
                 } else {
-                    invalid = true;
+                    *invalid = true;
                 }
-                0
             }
             reg::CLEAN_WAR => {
                 if params.is_empty() {
                     self.warn = 0;
                 } else {
-                    invalid = true;
+                    *invalid = true;
                 }
-                0
             }
             reg::SET_BRAKE => {
                 match params {
@@ -427,61 +467,25 @@ impl ArmBox {
                         }
                         self.system_reset();
                     }
-                    _ => invalid = true,
+                    _ => *invalid = true,
                 }
-                0
             }
-            reg::SET_MODE => {
-                match params {
-                    [m @ (mode::POSITION | mode::SERVO)]
-                    | [m @ (mode::POSITION | mode::SERVO), _] => {
-                        self.mode = *m;
-                        self.system_reset();
-                    }
-                    _ => invalid = true,
+            reg::SET_MODE => match params {
+                [m @ (mode::POSITION | mode::SERVO)] | [m @ (mode::POSITION | mode::SERVO), _] => {
+                    self.mode = *m;
+                    self.system_reset();
                 }
-                0
-            }
+                _ => *invalid = true,
+            },
             reg::MOVE_SERVOJ => {
-                self.servo_j(params, now_s, &mut invalid);
-                0
+                self.servo_j(params, now_s, invalid);
             }
             reg::MOVE_JOINT => {
-                self.move_joint(params, &mut invalid);
-                0
+                self.move_joint(params, invalid);
             }
-            reg::GET_TCP_POSE => put_f32s(&mut data, &tcp_pose(&self.reported_joints())),
-            reg::GET_JOINT_POS => {
-                let q = self.reported_joints();
-                match params.first().map(|n| n & 0x0F) {
-                    None | Some(0 | 1) => put_f32s(&mut data, &q),
-                    Some(n) => {
-                        let mut at = put_f32s(&mut data, &q);
-                        at += put_f32s(&mut data[at..], &self.plant.velocities());
-                        if n >= 3 {
-                            at += put_f32s(&mut data[at..], &[0.0; DOF]);
-                        }
-                        at
-                    }
-                }
-            }
-            reg::GET_JOINT_TAU => put_f32s(&mut data, &[0.0; DOF]),
-            _ => {
-                if self.unknown_registers.len() < 32 && !self.unknown_registers.contains(&register)
-                {
-                    self.unknown_registers.push(register);
-                }
-                // Warning 13, "command does not exist"; the reply also says invalid.
-                self.warn = codes::WARN_NO_SUCH_COMMAND;
-                invalid = true;
-                0
-            }
-        };
-        let mut state = self.state_byte();
-        if invalid {
-            state |= reg::STATE_INVALID;
+            _ => return false,
         }
-        BoxReply { state, len, data }
+        true
     }
 
     fn servo_j(&mut self, params: &[u8], now_s: f64, invalid: &mut bool) {

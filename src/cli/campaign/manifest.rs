@@ -408,6 +408,33 @@ fn count_cases(tables: &[Axes]) -> Option<(Vec<usize>, usize)> {
     Some((counts, total))
 }
 
+/// One [matrix] table's lists, each checked: a key that may vary, a list of distinct values.
+fn matrix_axes(t: &toml::Table, base: &Path) -> Result<Axes, ManifestError> {
+    let mut axes = Vec::new();
+    for (k, v) in t {
+        let def = key_def(k).ok_or_else(|| unknown(k, "[matrix]"))?;
+        if !def.matrix {
+            return Err(bad(format!(
+                "`{k}` is fixed for a campaign: put it in [run], not [matrix]"
+            )));
+        }
+        let list = v
+            .as_array()
+            .ok_or_else(|| bad(format!("[matrix] `{k}`: expected a list of values, got {v}")))?;
+        if list.is_empty() {
+            return Err(bad(format!("[matrix] `{k}`: the list is empty")));
+        }
+        let vals: Vec<Value> =
+            list.iter().map(|x| value(def, x, base)).collect::<Result<_, _>>()?;
+        let mut seen = std::collections::HashSet::new();
+        if let Some(dup) = vals.iter().find(|v| !seen.insert(v.to_string())) {
+            return Err(bad(format!("[matrix] `{k}` lists {dup} twice (two cases would be one)")));
+        }
+        axes.push((def, vals));
+    }
+    Ok(axes)
+}
+
 /// Check manifest text and count its cases (none is built); relative paths resolve against
 /// `base`. Every value is checked with the parsers of the `hitl plan` / `hitl run` flag it
 /// becomes ([`super::check`]), each against the defaults, once per distinct value.
@@ -458,30 +485,7 @@ pub fn parse(text: &str, base: &Path, default_name: &str) -> Result<Manifest, Ma
                             tables.len() + 1
                         )));
                     }
-                    let mut axes = Vec::new();
-                    for (k, v) in t {
-                        let def = key_def(k).ok_or_else(|| unknown(k, "[matrix]"))?;
-                        if !def.matrix {
-                            return Err(bad(format!(
-                                "`{k}` is fixed for a campaign: put it in [run], not [matrix]"
-                            )));
-                        }
-                        let list = v.as_array().ok_or_else(|| {
-                            bad(format!("[matrix] `{k}`: expected a list of values, got {v}"))
-                        })?;
-                        if list.is_empty() {
-                            return Err(bad(format!("[matrix] `{k}`: the list is empty")));
-                        }
-                        let vals: Vec<Value> =
-                            list.iter().map(|x| value(def, x, base)).collect::<Result<_, _>>()?;
-                        let mut seen = std::collections::HashSet::new();
-                        if let Some(dup) = vals.iter().find(|v| !seen.insert(v.to_string())) {
-                            return Err(bad(format!(
-                                "[matrix] `{k}` lists {dup} twice (two cases would be one)"
-                            )));
-                        }
-                        axes.push((def, vals));
-                    }
+                    let mut axes = matrix_axes(t, base)?;
                     axes.sort_by_key(|(d, _)| KEYS.iter().position(|k| k.name == d.name));
                     tables.push(axes);
                 }

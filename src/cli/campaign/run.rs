@@ -120,23 +120,7 @@ pub fn run(manifest: &Manifest, manifest_text: &str, opts: &RunOptions) -> u8 {
         },
         _ => None,
     };
-    // Cases by index, built when played. The same case twice (two [[matrix]] tables may both
-    // hold it) is played once.
-    let mut ids = std::collections::HashSet::new();
-    let mut done = 0usize;
-    let mut todo: Vec<usize> = Vec::new();
-    for i in selected {
-        let Some(case) = manifest.case(i) else { continue };
-        if !ids.insert(case.id.clone()) {
-            continue;
-        }
-        if store::is_done(&opts.out, &case) {
-            done += 1;
-        } else {
-            todo.push(i);
-        }
-    }
-    drop(ids);
+    let (done, todo) = cases_to_play(manifest, selected, &opts.out);
     crate::outln!(
         "campaign {}: {} cases, {} already done, {} to run, {} at a time -> {}",
         manifest.name,
@@ -154,10 +138,58 @@ pub fn run(manifest: &Manifest, manifest_text: &str, opts: &RunOptions) -> u8 {
         STOP.store(true, Ordering::SeqCst);
         super::child::interrupt_all();
     });
+    let t0 = Instant::now();
+    let outcomes = play_cases(manifest, &todo, opts);
+    let failed = outcomes.iter().filter(|(_, o)| matches!(o, Outcome::Failed { .. })).count();
+    let played = outcomes.len();
+    crate::outln!(
+        "campaign {}: {} played ({} failed), {} skipped, {} not started, in {:.1} s; \
+         `hitl campaign collect {}` tabulates",
+        manifest.name,
+        played,
+        failed,
+        done,
+        todo.len() - played,
+        t0.elapsed().as_secs_f64(),
+        opts.out.display()
+    );
+    if STOP.load(Ordering::SeqCst) {
+        crate::errln!("hitl campaign run: interrupted; run it again to resume");
+        130
+    } else if failed > 0 {
+        CASES_FAILED
+    } else {
+        crate::exit::OK
+    }
+}
+
+/// Of the `selected` cases, how many are already done in `out` and which are still to play.
+/// Cases by index, built when played; the same case twice (two [[matrix]] tables may both hold
+/// it) is played once.
+fn cases_to_play(manifest: &Manifest, selected: Vec<usize>, out: &Path) -> (usize, Vec<usize>) {
+    let mut ids = std::collections::HashSet::new();
+    let mut done = 0usize;
+    let mut todo: Vec<usize> = Vec::new();
+    for i in selected {
+        let Some(case) = manifest.case(i) else { continue };
+        if !ids.insert(case.id.clone()) {
+            continue;
+        }
+        if store::is_done(out, &case) {
+            done += 1;
+        } else {
+            todo.push(i);
+        }
+    }
+    (done, todo)
+}
+
+/// Play the `todo` cases, `opts.jobs` at a time, until done or stopped; each case's outcome by
+/// its index, in the order they ended.
+fn play_cases(manifest: &Manifest, todo: &[usize], opts: &RunOptions) -> Vec<(usize, Outcome)> {
     let bar = progress_bar(todo.len(), opts.plain);
     let next = AtomicUsize::new(0);
     let outcomes: Mutex<Vec<(usize, Outcome)>> = Mutex::new(Vec::new());
-    let t0 = Instant::now();
     std::thread::scope(|s| {
         for _ in 0..opts.jobs.clamp(1, todo.len().max(1)) {
             s.spawn(|| loop {
@@ -185,28 +217,7 @@ pub fn run(manifest: &Manifest, manifest_text: &str, opts: &RunOptions) -> u8 {
     if let Some(b) = &bar {
         b.finish_and_clear();
     }
-    let outcomes = outcomes.into_inner().unwrap_or_default();
-    let failed = outcomes.iter().filter(|(_, o)| matches!(o, Outcome::Failed { .. })).count();
-    let played = outcomes.len();
-    crate::outln!(
-        "campaign {}: {} played ({} failed), {} skipped, {} not started, in {:.1} s; \
-         `hitl campaign collect {}` tabulates",
-        manifest.name,
-        played,
-        failed,
-        done,
-        todo.len() - played,
-        t0.elapsed().as_secs_f64(),
-        opts.out.display()
-    );
-    if STOP.load(Ordering::SeqCst) {
-        crate::errln!("hitl campaign run: interrupted; run it again to resume");
-        130
-    } else if failed > 0 {
-        CASES_FAILED
-    } else {
-        crate::exit::OK
-    }
+    outcomes.into_inner().unwrap_or_default()
 }
 
 /// Hold `case`'s lock (DIR/cases/<id>/case.lock), creating its folder.
