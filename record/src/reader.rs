@@ -142,6 +142,53 @@ pub fn frames_recorded(path: &Path) -> Option<u64> {
     Some(n)
 }
 
+/// What [`visit`]'s walk has seen so far.
+#[derive(Default)]
+struct Walk {
+    /// Topic by channel id.
+    channels: HashMap<u16, String>,
+    /// A record past the header (a channel, a message, metadata...) was read.
+    data_record: bool,
+    /// The footer was read.
+    complete: bool,
+    /// `/calibration` frames read.
+    frames_read: u64,
+}
+
+impl Walk {
+    /// Take one record: messages go to `on_msg`, metadata to `on_meta`. Break when `on_msg`
+    /// stops the walk.
+    fn take(
+        &mut self,
+        rec: Record<'_>,
+        on_msg: &mut impl FnMut(RawMessage<'_>) -> ControlFlow<()>,
+        on_meta: &mut impl FnMut(&str, &BTreeMap<String, String>),
+    ) -> ControlFlow<()> {
+        match rec {
+            Record::Header(_) => {}
+            Record::Channel(c) => {
+                self.data_record = true;
+                self.channels.insert(c.id, c.topic);
+            }
+            Record::Message { header, data } => {
+                self.data_record = true;
+                let topic = self.channels.get(&header.channel_id).map(String::as_str).unwrap_or("");
+                if topic == topics::CALIBRATION {
+                    self.frames_read += 1;
+                }
+                return on_msg(RawMessage { topic, log_time: header.log_time, data: &data });
+            }
+            Record::Metadata(m) => {
+                self.data_record = true;
+                on_meta(&m.name, &m.metadata)
+            }
+            Record::Footer(_) => self.complete = true,
+            _ => self.data_record = true,
+        }
+        ControlFlow::Continue(())
+    }
+}
+
 /// Walk every message and metadata record in file order, as far as the file is sound (see the
 /// module's documentation). `on_msg` may stop the walk early.
 pub fn visit(
@@ -157,10 +204,8 @@ pub fn visit(
             .with_record_length_limit(RECORD_LIMIT)
             .with_prevalidate_chunk_crcs(true),
     );
-    let mut channels: HashMap<u16, String> = HashMap::new();
-    let (mut bytes, mut any_record, mut data_record) = (0u64, false, false);
-    let mut complete = false;
-    let mut frames_read = 0u64;
+    let mut walk = Walk::default();
+    let (mut bytes, mut any_record) = (0u64, false);
     // Why the walk stopped before the footer (None: it reached the footer, or the caller
     // stopped it).
     let mut stopped: Option<String> = None;
@@ -176,7 +221,7 @@ pub fn visit(
                     };
                     return Err(ReadError::NotMcap { path: p, reason });
                 }
-                if !complete {
+                if !walk.complete {
                     stopped = Some(describe(&e));
                 }
                 break;
@@ -214,41 +259,19 @@ pub fn visit(
                         break;
                     }
                 };
-                match rec {
-                    Record::Header(_) => {}
-                    Record::Channel(c) => {
-                        data_record = true;
-                        channels.insert(c.id, c.topic);
-                    }
-                    Record::Message { header, data } => {
-                        data_record = true;
-                        let topic =
-                            channels.get(&header.channel_id).map(String::as_str).unwrap_or("");
-                        if topic == topics::CALIBRATION {
-                            frames_read += 1;
-                        }
-                        let m = RawMessage { topic, log_time: header.log_time, data: &data };
-                        if on_msg(m).is_break() {
-                            return Ok(ReadEnd {
-                                complete: false,
-                                truncated: None,
-                                frames_read,
-                                frames_recorded: frames_recorded(path),
-                            });
-                        }
-                    }
-                    Record::Metadata(m) => {
-                        data_record = true;
-                        on_meta(&m.name, &m.metadata)
-                    }
-                    Record::Footer(_) => complete = true,
-                    _ => data_record = true,
+                if walk.take(rec, &mut on_msg, &mut on_meta).is_break() {
+                    return Ok(ReadEnd {
+                        complete: false,
+                        truncated: None,
+                        frames_read: walk.frames_read,
+                        frames_recorded: frames_recorded(path),
+                    });
                 }
             }
         }
     }
     let recorded = frames_recorded(path);
-    if !data_record && recorded.is_none() {
+    if !walk.data_record && recorded.is_none() {
         // Nothing but (part of) a header: no chunk, no summary. Not an empty recording.
         return Err(ReadError::Unreadable {
             path: p,
@@ -260,13 +283,13 @@ pub fn visit(
         });
     }
     Ok(ReadEnd {
-        complete,
-        truncated: if complete {
+        complete: walk.complete,
+        truncated: if walk.complete {
             None
         } else {
             stopped.or(Some("the file ends before its footer".into()))
         },
-        frames_read,
+        frames_read: walk.frames_read,
         frames_recorded: recorded,
     })
 }
@@ -580,11 +603,11 @@ mod tests {
     #[test]
     fn intrinsics_are_what_the_recorder_wrote_and_bad_ones_are_named() {
         let k = Intrinsics { width: 640, height: 400, fx: 500.0, fy: 501.0, cx: 320.5, cy: 199.5 };
-        let data = crate::sink::calibration(&k, 7, 1).encode_to_vec();
+        let data = crate::channels::calibration(&k, 7, 1).encode_to_vec();
         let (t, back) = decode_intrinsics(&data, 99).expect("decodes");
         assert_eq!((t, back), (7, k));
         let zero_fx = Intrinsics { fx: 0.0, ..k };
-        let data = crate::sink::calibration(&zero_fx, 7, 1).encode_to_vec();
+        let data = crate::channels::calibration(&zero_fx, 7, 1).encode_to_vec();
         assert!(matches!(decode_intrinsics(&data, 99), Err(CalibrationError::NoUsableK)));
         assert!(matches!(decode_intrinsics(&[0xff; 3], 0), Err(CalibrationError::Undecodable(_))));
     }
