@@ -1,10 +1,8 @@
-//! The one trait every pose-estimation backend implements, its answer, and backend selection.
+//! The one trait every pose-estimation backend implements, and its answer. It names no backend:
+//! choosing one by name is [`crate::backends`].
 
-use crate::icp::{IcpConfig, IcpTracker};
-use crate::models::Mesh;
 use crate::{PerceptionError, PerceptionFrame};
 use hitl_hal::Pose;
-use std::path::PathBuf;
 
 /// How an estimate came about.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, serde::Serialize)]
@@ -53,51 +51,4 @@ pub trait ScalableEstimator: PoseEstimator {
     /// The scene (depth and mesh) is now `factor` times what it was: scale the mesh and any
     /// remembered translation by `factor`.
     fn rescale_scene(&mut self, factor: f64);
-}
-
-/// A parsed `--perception` / `--backend` value.
-#[derive(Debug, Clone, PartialEq)]
-pub enum BackendSpec {
-    None,
-    Icp,
-    Onnx(PathBuf),
-    Socket(PathBuf),
-}
-
-impl std::str::FromStr for BackendSpec {
-    type Err = PerceptionError;
-    fn from_str(s: &str) -> Result<Self, Self::Err> {
-        match s {
-            "none" => Ok(BackendSpec::None),
-            "icp" => Ok(BackendSpec::Icp),
-            _ => {
-                if let Some(p) = s.strip_prefix("onnx:").filter(|p| !p.is_empty()) {
-                    Ok(BackendSpec::Onnx(PathBuf::from(p)))
-                } else if let Some(p) = s.strip_prefix("socket:").filter(|p| !p.is_empty()) {
-                    Ok(BackendSpec::Socket(PathBuf::from(p)))
-                } else {
-                    Err(PerceptionError::UnknownBackend(s.to_string()))
-                }
-            }
-        }
-    }
-}
-
-/// Builds the backend a spec names. `mesh` is the target model at the scale the camera sees it
-/// (lab metres); the ICP tracker, mask-output ONNX models and the external estimator
-/// (which receives it in its handshake) need it. `None` gives `Ok(None)`.
-pub fn backend_from_spec(
-    spec: &BackendSpec,
-    mesh: &Mesh,
-) -> Result<Option<Box<dyn PoseEstimator>>, PerceptionError> {
-    Ok(match spec {
-        BackendSpec::None => None,
-        BackendSpec::Icp => Some(Box::new(IcpTracker::new(mesh, IcpConfig::default())?)),
-        BackendSpec::Onnx(path) => {
-            Some(Box::new(crate::onnx::OnnxEstimator::load(path, Some(mesh))?))
-        }
-        BackendSpec::Socket(path) => {
-            Some(Box::new(crate::socket::SocketEstimator::connect(path, mesh)?))
-        }
-    })
 }

@@ -8,6 +8,7 @@
 //! OBJ/STL). All poses are 4x4 rigid transforms from the target (model) frame to the camera frame,
 //! OpenCV camera axes (x right, y down, z forward), metres of the scene the camera sees.
 
+pub mod backends;
 pub mod bench;
 pub mod error;
 pub mod estimator;
@@ -26,8 +27,9 @@ pub mod socket;
 pub mod testing;
 pub mod worker;
 
+pub use backends::{backend_from_spec, BackendSpec};
 pub use error::PerceptionError;
-pub use estimator::{backend_from_spec, BackendSpec, Estimate, EstimateKind, PoseEstimator};
+pub use estimator::{Estimate, EstimateKind, PoseEstimator};
 pub use frame::PerceptionFrame;
 pub use metrics::{evaluate, FrameError, Metrics, PosePair};
 pub use models::{Mesh, SymmetryClass, TargetModel};
