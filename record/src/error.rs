@@ -1,6 +1,6 @@
 //! Errors of recording and reading.
 
-use crate::recorder::RecordSummary;
+use crate::summary::RecordSummary;
 
 /// Why the recorder could not start, write, or close.
 #[derive(Debug, thiserror::Error)]

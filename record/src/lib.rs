@@ -7,8 +7,14 @@
 //! docs/architecture.md (see docs/mcap-topics.md), closing a chunk at least every 250 ms so a killed
 //! process loses at most that. [`RecorderHealth::is_failed`] tells the tick when the file can
 //! no longer be written so the interlock can trip.
+//!
+//! Inside the writing side, imports go one way, from the thread down to the bytes:
+//! `recorder` (the thread, its queues and health) -> `sink` (the MCAP file) -> `live` (the live
+//! view's tap, offered every message the sink writes) -> `channels` (topics, schemas, shared
+//! encodings) -> `msg`, `topics`, `error` -> `summary`. Nothing lower imports anything higher.
 
 pub mod bench;
+mod channels;
 pub mod compression;
 pub mod error;
 pub mod health;
@@ -20,6 +26,7 @@ pub mod reader;
 pub mod recorder;
 pub mod report;
 mod sink;
+pub mod summary;
 pub mod topics;
 
 pub use compression::{ChunkCompression, CompressionParseError};
@@ -32,5 +39,6 @@ pub use msg::{
     Plane, PoseStamped, SafetyEventMsg, SetpointMsg, TfMsg, TimingMsg, TriggerFiredMsg,
 };
 pub use queues::{QueueCapacity, Telemetry};
-pub use recorder::{RecordSummary, Recorder, RecorderConfig, RecorderHandle};
+pub use recorder::{Recorder, RecorderConfig, RecorderHandle};
 pub use sink::DepthOutput;
+pub use summary::RecordSummary;

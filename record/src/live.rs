@@ -22,7 +22,7 @@
 //! its handle); the hand-off is drained by a thread of its own (`hitl-live`), so the recorder
 //! never waits on a viewer's socket or on the server's locks.
 
-use crate::sink::{Ch, CHANNELS};
+use crate::channels::{Ch, CHANNELS};
 use crate::topics;
 use foxglove::messages as fg;
 use foxglove::websocket::ServerListener;
@@ -301,7 +301,7 @@ impl LiveTap {
         if let (true, Some(c)) = (want_color, color) {
             let (w, h, px) = shrink_rgb8(&c.data, c.width, c.height, factor);
             let msg = fg::RawImage {
-                timestamp: crate::sink::ts(t),
+                timestamp: crate::channels::ts(t),
                 frame_id: topics::FRAME_CAMERA.to_string(),
                 width: w,
                 height: h,
@@ -316,7 +316,7 @@ impl LiveTap {
             }
         }
         if want_cal {
-            let cal = crate::sink::calibration(&f.intrinsics, t, factor);
+            let cal = crate::channels::calibration(&f.intrinsics, t, factor);
             if let Some(buf) = encode(&cal) {
                 self.send(Ch::Calibration, t, buf);
             }

@@ -12,9 +12,10 @@ use crate::live::LiveTap;
 use crate::metadata::RunMetadata;
 use crate::msg::{EventKind, SafetyEventMsg};
 use crate::queues::{QueueCapacity, Telemetry, COUNTED_TOPICS};
-use crate::sink::{DepthOutput, McapSink, CHANNELS};
+use crate::channels::CHANNELS;
+use crate::sink::{DepthOutput, McapSink};
+use crate::summary::RecordSummary;
 use crate::topics;
-use serde::Serialize;
 use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
 use std::sync::atomic::{AtomicBool, Ordering};
@@ -53,26 +54,6 @@ impl Default for RecorderConfig {
             depth_output: DepthOutput::AsDelivered,
         }
     }
-}
-
-/// What a recording holds, as counted by the recorder.
-#[derive(Debug, Clone, Default, PartialEq, Serialize)]
-pub struct RecordSummary {
-    pub path: PathBuf,
-    /// Messages written per topic.
-    pub written: BTreeMap<String, u64>,
-    /// Telemetry dropped per topic (queue full, oldest dropped).
-    pub dropped: BTreeMap<String, u64>,
-    /// Captures that could not be queued (each also a `capture-not-recorded` event).
-    pub frames_not_recorded: u64,
-    /// Message payload bytes written (before compression).
-    pub bytes_in: u64,
-    /// Size of the file on disk.
-    pub file_bytes: u64,
-    /// Seconds from spawn to close.
-    pub elapsed_s: f64,
-    /// Why the recorder stopped writing, if it did.
-    pub failure: Option<String>,
 }
 
 /// Starts recorders.

@@ -4,6 +4,7 @@
 //! Foxglove's well-known protobuf schemas (from the `foxglove` crate) so Foxglove and the
 //! Python `mcap-protobuf-support` decoder read them as they are.
 
+use crate::channels::{calibration, ts, Ch, CHANNELS};
 use crate::compression::ChunkCompression;
 use crate::error::RecordError;
 use crate::metadata::RunMetadata;
@@ -14,93 +15,13 @@ use crate::msg::{
 use crate::topics;
 use foxglove::messages as fg;
 use foxglove::Encode;
-use hitl_hal::{pose, Intrinsics, Pose};
+use hitl_hal::{pose, Pose};
 use mcap::records::{MessageHeader, Metadata};
 use serde::Serialize;
 use std::collections::BTreeMap;
 use std::fs::File;
 use std::io::BufWriter;
 use std::path::Path;
-
-/// Every channel of the file, in a fixed order.
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
-pub(crate) enum Ch {
-    Setpoint,
-    State,
-    Timing,
-    Light,
-    Event,
-    Tf,
-    PoseGt,
-    PoseEstimate,
-    Color,
-    Depth,
-    Mask,
-    Calibration,
-    CaptureSync,
-    TriggerFired,
-    Stats,
-}
-
-pub(crate) const CHANNELS: [Ch; 15] = [
-    Ch::Setpoint,
-    Ch::State,
-    Ch::Timing,
-    Ch::Light,
-    Ch::Event,
-    Ch::Tf,
-    Ch::PoseGt,
-    Ch::PoseEstimate,
-    Ch::Color,
-    Ch::Depth,
-    Ch::Mask,
-    Ch::Calibration,
-    Ch::CaptureSync,
-    Ch::TriggerFired,
-    Ch::Stats,
-];
-
-impl Ch {
-    pub(crate) fn topic(self) -> &'static str {
-        match self {
-            Ch::Setpoint => topics::SETPOINT,
-            Ch::State => topics::STATE,
-            Ch::Timing => topics::TIMING,
-            Ch::Light => topics::LIGHT,
-            Ch::Event => topics::EVENT,
-            Ch::Tf => topics::TF,
-            Ch::PoseGt => topics::POSE_GT,
-            Ch::PoseEstimate => topics::POSE_ESTIMATE,
-            Ch::Color => topics::COLOR,
-            Ch::Depth => topics::DEPTH,
-            Ch::Mask => topics::MASK,
-            Ch::Calibration => topics::CALIBRATION,
-            Ch::CaptureSync => topics::CAPTURE_SYNC,
-            Ch::TriggerFired => topics::TRIGGER_FIRED,
-            Ch::Stats => topics::RECORDER_STATS,
-        }
-    }
-
-    pub(crate) fn schema(self) -> Result<(String, &'static str, Vec<u8>), RecordError> {
-        fn fox<T: Encode>() -> Result<(String, &'static str, Vec<u8>), RecordError> {
-            let s = T::get_schema()
-                .ok_or_else(|| RecordError::Encode("foxglove schema missing".into()))?;
-            Ok((s.name, "protobuf", s.data.into_owned()))
-        }
-        match self {
-            Ch::Tf => fox::<fg::FrameTransforms>(),
-            Ch::PoseGt | Ch::PoseEstimate => fox::<fg::PoseInFrame>(),
-            Ch::Color | Ch::Depth | Ch::Mask => fox::<fg::RawImage>(),
-            Ch::Calibration => fox::<fg::CameraCalibration>(),
-            _ => {
-                let (name, s) = topics::json_schema(self.topic()).ok_or_else(|| {
-                    RecordError::Encode(format!("no schema for {}", self.topic()))
-                })?;
-                Ok((name.to_string(), "jsonschema", s.into_bytes()))
-            }
-        }
-    }
-}
 
 /// How depth is written.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
@@ -123,11 +44,6 @@ pub(crate) struct McapSink {
     depth_output: DepthOutput,
     /// The live view's tap (`hitl run --live`): every message written is offered to it.
     pub live: Option<crate::live::LiveTap>,
-}
-
-pub(crate) fn ts(ns: u64) -> Option<fg::Timestamp> {
-    let sec = u32::try_from(ns / 1_000_000_000).unwrap_or(u32::MAX);
-    Some(fg::Timestamp::new(sec, (ns % 1_000_000_000) as u32))
 }
 
 /// The Foxglove pose of a [`Pose`]: position in metres, orientation as the unit quaternion
@@ -439,25 +355,6 @@ impl McapSink {
             .map_err(|e| RecordError::Io { path: "recording".into(), source: e.into_error() })?;
         file.sync_all().map_err(|e| RecordError::Io { path: "recording".into(), source: e })?;
         Ok(())
-    }
-}
-
-/// The calibration of a registered stream (no distortion, R = I) at time `t`, for its image
-/// shrunk by a whole `factor` (1: as captured; pixel centres map as (c + 0.5) / factor - 0.5).
-pub(crate) fn calibration(i: &Intrinsics, t: u64, factor: u32) -> fg::CameraCalibration {
-    let s = f64::from(factor.max(1));
-    let (fx, fy) = (i.fx / s, i.fy / s);
-    let (cx, cy) = ((i.cx + 0.5) / s - 0.5, (i.cy + 0.5) / s - 0.5);
-    fg::CameraCalibration {
-        timestamp: ts(t),
-        frame_id: topics::FRAME_CAMERA.to_string(),
-        width: i.width / factor.max(1),
-        height: i.height / factor.max(1),
-        distortion_model: "plumb_bob".to_string(),
-        d: vec![0.0; 5],
-        k: vec![fx, 0.0, cx, 0.0, fy, cy, 0.0, 0.0, 1.0],
-        r: vec![1.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 1.0],
-        p: vec![fx, 0.0, cx, 0.0, 0.0, fy, cy, 0.0, 0.0, 0.0, 1.0, 0.0],
     }
 }
 
