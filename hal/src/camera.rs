@@ -1,6 +1,12 @@
 //! RGB-D cameras that capture on a trigger from the tick and deliver frames later.
 
 use crate::error::ErrorType;
+use std::sync::Arc;
+
+/// One image buffer of a frame, shared rather than copied: the recorder and perception hold the
+/// same pixels (cloning it clones the pointer). Built from the `Vec` a camera fills, without
+/// copying (`Arc::new(vec)`).
+pub type SharedPixels<T> = Arc<Vec<T>>;
 
 /// Pinhole intrinsics of the colour and depth streams (registered to each other), OpenCV axes.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -53,11 +59,11 @@ pub struct RgbdFrame {
     pub timestamp: TimestampSource,
     pub intrinsics: Intrinsics,
     /// Colour, rgb8, row-major, `width * height * 3` bytes.
-    pub color: Vec<u8>,
+    pub color: SharedPixels<u8>,
     /// Depth in metres, row-major; 0 where there is no return.
-    pub depth_m: Vec<f32>,
+    pub depth_m: SharedPixels<f32>,
     /// Target mask, mono8 (255 target, 0 else), when the camera can give one.
-    pub mask: Option<Vec<u8>>,
+    pub mask: Option<SharedPixels<u8>>,
 }
 
 /// An RGB-D camera in software- or hardware-triggered mode.

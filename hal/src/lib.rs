@@ -22,7 +22,7 @@ pub mod trigger;
 
 pub use arm::{Arm, ArmReports, ArmState, Joints, DOF};
 pub use camera::{
-    CaptureRequest, Intrinsics, RgbdCamera, RgbdFrame, StreamConfig, TimestampSource,
+    CaptureRequest, Intrinsics, RgbdCamera, RgbdFrame, SharedPixels, StreamConfig, TimestampSource,
 };
 pub use clock::{Clock, MonotonicClock};
 pub use error::{Error, ErrorKind, ErrorType};

@@ -1,9 +1,11 @@
 //! What a backend sees of one capture: colour, depth (metres), optional mask, intrinsics, stamp.
 
 use crate::PerceptionError;
-use hitl_hal::{Intrinsics, RgbdFrame};
+use hitl_hal::{Intrinsics, RgbdFrame, SharedPixels};
+use std::sync::Arc;
 
-/// One frame handed to a pose estimator.
+/// One frame handed to a pose estimator. Its pixels are the camera frame's own, shared with the
+/// recorder ([`SharedPixels`]), not copied.
 #[derive(Debug, Clone, PartialEq)]
 pub struct PerceptionFrame {
     /// Capture timestamp (host monotonic ns); the estimate carries it back unchanged.
@@ -12,11 +14,11 @@ pub struct PerceptionFrame {
     pub seq: u64,
     pub intrinsics: Intrinsics,
     /// rgb8, row-major, `width * height * 3` bytes (may be empty for depth-only backends).
-    pub color: Vec<u8>,
+    pub color: SharedPixels<u8>,
     /// Depth in metres, row-major, 0 (or non-finite) where there is no return.
-    pub depth_m: Vec<f32>,
+    pub depth_m: SharedPixels<f32>,
     /// Target mask, 0 = background, anything else = target.
-    pub mask: Option<Vec<u8>>,
+    pub mask: Option<SharedPixels<u8>>,
 }
 
 impl PerceptionFrame {
@@ -90,8 +92,8 @@ impl From<&RgbdFrame> for PerceptionFrame {
             timestamp_ns: f.exposure_ns,
             seq: f.request.tick,
             intrinsics: f.intrinsics,
-            color: f.color.clone(),
-            depth_m: f.depth_m.clone(),
+            color: Arc::clone(&f.color),
+            depth_m: Arc::clone(&f.depth_m),
             mask: f.mask.clone(),
         }
     }

@@ -29,9 +29,9 @@ pub fn normalize_frame(frame: &PerceptionFrame) -> Result<(PerceptionFrame, f64)
         .filter(|k| k.is_finite() && *k > 0.0)
         .ok_or_else(|| PerceptionError::BadFrame("no target pixel with valid depth".into()))?;
     let mut out = frame.clone();
-    for d in &mut out.depth_m {
-        *d = (*d as f64 / k) as f32;
-    }
+    // New depth; colour and mask stay shared with `frame`.
+    out.depth_m =
+        std::sync::Arc::new(frame.depth_m.iter().map(|d| (*d as f64 / k) as f32).collect());
     Ok((out, k))
 }
 

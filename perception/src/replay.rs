@@ -60,9 +60,9 @@ pub fn replay_frames(
             timestamp_ns: t,
             seq,
             intrinsics: *k,
-            color: p.color.filter(|c| c.len() == 3 * n).unwrap_or_default(),
-            depth_m: depth,
-            mask: p.mask.filter(|m| m.len() == n),
+            color: p.color.filter(|c| c.len() == 3 * n).unwrap_or_default().into(),
+            depth_m: depth.into(),
+            mask: p.mask.filter(|m| m.len() == n).map(Into::into),
         };
         seq += 1;
         s.frames += 1;

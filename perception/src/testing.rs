@@ -72,7 +72,7 @@ pub fn render(mesh: &Mesh, pose: &Pose, k: &Intrinsics, timestamp_ns: u64) -> Pe
             }
         }
     }
-    let mask = depth.iter().map(|d| if d.is_finite() { 255 } else { 0 }).collect();
+    let mask: Vec<u8> = depth.iter().map(|d| if d.is_finite() { 255 } else { 0 }).collect();
     for d in &mut depth {
         if !d.is_finite() {
             *d = 0.0;
@@ -82,9 +82,9 @@ pub fn render(mesh: &Mesh, pose: &Pose, k: &Intrinsics, timestamp_ns: u64) -> Pe
         timestamp_ns,
         seq: 0,
         intrinsics: *k,
-        color,
-        depth_m: depth,
-        mask: Some(mask),
+        color: color.into(),
+        depth_m: depth.into(),
+        mask: Some(mask.into()),
     }
 }
 

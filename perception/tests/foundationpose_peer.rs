@@ -181,8 +181,9 @@ fn hitl_against_the_peer_registers_tracks_normalises_and_refuses_a_maskless_fram
     let mut f0 = frame(0, 4.0);
     let on_target: Vec<usize> =
         (0..f0.depth_m.len()).filter(|&i| f0.depth_m[i] > 0.0).step_by(50).collect();
+    let depth = std::sync::Arc::make_mut(&mut f0.depth_m);
     for (n, &i) in on_target.iter().enumerate() {
-        f0.depth_m[i] = if n % 2 == 0 { f32::NAN } else { f32::INFINITY };
+        depth[i] = if n % 2 == 0 { f32::NAN } else { f32::INFINITY };
     }
     let frames = [f0, frame(1, 3.0), frame(2, 3.5), frame(4, 2.5)];
     let mut kinds = Vec::new();

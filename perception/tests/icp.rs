@@ -193,13 +193,13 @@ fn a_symmetric_target_keeps_its_branch_through_an_occlusion() {
 /// `fraction` of the target's rows: depth nearer than the target, not in the mask.
 fn hide_lower_part(frame: &mut PerceptionFrame, fraction: f64, depth_m: f32) {
     let w = frame.intrinsics.width as usize;
-    let mask = frame.mask.as_mut().unwrap();
+    let mask = std::sync::Arc::make_mut(frame.mask.as_mut().unwrap());
     let rows: Vec<usize> = (0..mask.len()).filter(|&i| mask[i] != 0).map(|i| i / w).collect();
     let (top, bottom) = (*rows.iter().min().unwrap(), *rows.iter().max().unwrap());
     let from = bottom - ((bottom - top) as f64 * fraction) as usize;
     let hidden = from * w..(bottom + 1) * w;
     mask[hidden.clone()].fill(0);
-    frame.depth_m[hidden].fill(depth_m);
+    std::sync::Arc::make_mut(&mut frame.depth_m)[hidden].fill(depth_m);
 }
 
 #[test]

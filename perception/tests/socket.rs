@@ -177,7 +177,7 @@ fn centroid_pose_matches_the_masked_back_projection() {
 
     // The mask travels and is used: cover the left half and the centroid moves right.
     let mut half = frame(6);
-    let mask = half.mask.as_mut().unwrap();
+    let mask = std::sync::Arc::make_mut(half.mask.as_mut().unwrap());
     for (i, m) in mask.iter_mut().enumerate() {
         if (i % W as usize) < W as usize / 2 {
             *m = 0;
@@ -190,7 +190,7 @@ fn centroid_pose_matches_the_masked_back_projection() {
 
     // No colour and no mask: every valid depth pixel counts (the background has depth 0).
     let mut bare = frame(7);
-    bare.color.clear();
+    bare.color = Vec::new().into();
     bare.mask = None;
     let e3 = est.estimate(&bare).unwrap();
     assert_centroid_pose(&e3, &bare);
@@ -204,12 +204,12 @@ fn an_empty_mask_or_no_depth_is_lost() {
     let peer = Peer::start(&["--quiet"]);
     let mut est = connect(&peer);
     let mut f = frame(3);
-    f.mask = Some(vec![0; (W * H) as usize]);
+    f.mask = Some(vec![0; (W * H) as usize].into());
     let e = est.estimate(&f).unwrap();
     assert_eq!(e.kind, EstimateKind::Lost);
     assert!(e.pose.is_none());
     let mut f = frame(4);
-    f.depth_m.iter_mut().for_each(|d| *d = 0.0);
+    std::sync::Arc::make_mut(&mut f.depth_m).iter_mut().for_each(|d| *d = 0.0);
     assert_eq!(est.estimate(&f).unwrap().kind, EstimateKind::Lost);
     // And the connection is still good.
     assert_eq!(est.estimate(&frame(5)).unwrap().kind, EstimateKind::Direct);
@@ -245,7 +245,7 @@ fn a_bad_frame_is_refused_before_the_socket() {
     let peer = Peer::start(&["--quiet"]);
     let mut est = connect(&peer);
     let mut f = frame(1);
-    f.depth_m.pop();
+    std::sync::Arc::make_mut(&mut f.depth_m).pop();
     assert!(matches!(est.estimate(&f), Err(PerceptionError::BadFrame(_))));
     let f = frame(2);
     assert_centroid_pose(&est.estimate(&f).unwrap(), &f);

@@ -106,11 +106,11 @@ fn frame(k: u32, depth: &[Vec<u16>], color: &[Vec<u8>], t_ns: u64) -> FrameRecor
             cx: 640.0,
             cy: 400.0,
         },
-        color: Some(Plane { width: COLOR_W, height: COLOR_H, data: color[i].clone() }),
+        color: Some(Plane { width: COLOR_W, height: COLOR_H, data: color[i].clone().into() }),
         depth: Some(DepthImage::Millimetres(Plane {
             width: DEPTH_W,
             height: DEPTH_H,
-            data: depth[i].clone(),
+            data: depth[i].clone().into(),
         })),
         mask: None,
         gt_pose: None,

@@ -4,7 +4,7 @@
 //! so the real-time tick can push them into bounded lock-free queues without allocating. Frames
 //! carry their pixel buffers and are built outside the tick by the camera intake.
 
-use hitl_hal::{ArmState, CaptureRequest, Intrinsics, Pose, RgbdFrame, DOF};
+use hitl_hal::{ArmState, CaptureRequest, Intrinsics, Pose, RgbdFrame, SharedPixels, DOF};
 use serde::{Deserialize, Serialize};
 
 /// Which part of a run a setpoint belongs to: the hal's one [`Phase`]. `/arm/setpoint` never
@@ -255,7 +255,8 @@ pub struct PoseStamped {
 pub struct Plane<T> {
     pub width: u32,
     pub height: u32,
-    pub data: Vec<T>,
+    /// The camera frame's own buffer, shared with perception (not copied).
+    pub data: SharedPixels<T>,
 }
 
 impl<T> Plane<T> {

@@ -5,6 +5,7 @@
 //! and burn CPU, which must not stall the async runtime's other tasks (perception, camera
 //! intake, signals).
 
+use crate::channels::CHANNELS;
 use crate::compression::ChunkCompression;
 use crate::error::RecordError;
 use crate::health::RecorderHealth;
@@ -12,7 +13,6 @@ use crate::live::LiveTap;
 use crate::metadata::RunMetadata;
 use crate::msg::{EventKind, SafetyEventMsg};
 use crate::queues::{QueueCapacity, Telemetry, COUNTED_TOPICS};
-use crate::channels::CHANNELS;
 use crate::sink::{DepthOutput, McapSink};
 use crate::summary::RecordSummary;
 use crate::topics;

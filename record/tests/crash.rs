@@ -72,14 +72,16 @@ fn child_recorder() {
             let mut f = frame(k, t, true);
             f.intrinsics.width = w;
             f.intrinsics.height = h;
-            f.color = Some(Plane { width: w, height: h, data: noise((w * h * 3) as usize, k) });
+            f.color =
+                Some(Plane { width: w, height: h, data: noise((w * h * 3) as usize, k).into() });
             f.depth = Some(DepthImage::Millimetres(Plane {
                 width: w,
                 height: h,
                 data: noise((w * h * 2) as usize, k + 7)
                     .chunks_exact(2)
                     .map(|b| u16::from_le_bytes([b[0], b[1]]))
-                    .collect(),
+                    .collect::<Vec<_>>()
+                    .into(),
             }));
             f.mask = None;
             tel.push_frame(f);

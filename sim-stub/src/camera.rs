@@ -465,9 +465,9 @@ impl Worker {
             exposure_ns,
             timestamp: TimestampSource::DeviceExposure,
             intrinsics: image.intrinsics,
-            color: image.color,
-            depth_m: image.depth_m,
-            mask: Some(image.mask),
+            color: Arc::new(image.color),
+            depth_m: Arc::new(image.depth_m),
+            mask: Some(Arc::new(image.mask)),
         };
         let truth = RenderTruth {
             tick: request.tick,

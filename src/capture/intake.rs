@@ -221,7 +221,7 @@ impl Worker {
             .history
             .joints_at(frame.exposure_ns)
             .or(capture.map(|c| c.commanded.q))
-            .unwrap_or([0.0; 7]);
+            .unwrap_or([0.0; hitl_hal::DOF]);
         let gt = self.frames.target_in_camera(&q);
         // The frame's mask as the run chose: the camera's, drawn at this pose, or none. An empty
         // drawn mask (target out of view) goes on as it is: the estimator finds no target and
@@ -230,7 +230,11 @@ impl Worker {
             IntakeMask::Camera => {}
             IntakeMask::Rendered(drawer) => {
                 let truth = frame.mask.take();
-                frame.mask = Some(drawer.draw(&gt, &frame.intrinsics, truth.as_deref()));
+                frame.mask = Some(Arc::new(drawer.draw(
+                    &gt,
+                    &frame.intrinsics,
+                    truth.as_deref().map(Vec::as_slice),
+                )));
             }
             IntakeMask::Dropped => frame.mask = None,
         }
@@ -240,8 +244,9 @@ impl Worker {
                 timestamp_ns: frame.exposure_ns,
                 seq: request.tick,
                 intrinsics: frame.intrinsics,
-                color: frame.color.clone(),
-                depth_m: frame.depth_m.clone(),
+                // The recorder's pixels, shared: no copy.
+                color: Arc::clone(&frame.color),
+                depth_m: Arc::clone(&frame.depth_m),
                 mask: frame.mask.clone(),
             });
             self.stats.to_perception += 1;

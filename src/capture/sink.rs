@@ -197,8 +197,8 @@ mod tests {
             exposure_ns: 0,
             timestamp: TimestampSource::HostArrival,
             intrinsics: Intrinsics { width: 2, height: 2, fx: 1.0, fy: 1.0, cx: 1.0, cy: 1.0 },
-            color: vec![7; 12],
-            depth_m: vec![1.0; 4],
+            color: vec![7; 12].into(),
+            depth_m: vec![1.0; 4].into(),
             mask: None,
         }
     }

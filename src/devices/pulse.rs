@@ -194,8 +194,8 @@ mod tests {
             exposure_ns,
             timestamp: TimestampSource::HostArrival,
             intrinsics: Intrinsics { width: 1, height: 1, fx: 1.0, fy: 1.0, cx: 0.0, cy: 0.0 },
-            color: vec![0; 3],
-            depth_m: vec![0.0],
+            color: vec![0; 3].into(),
+            depth_m: vec![0.0].into(),
             mask: None,
         }
     }

@@ -18,7 +18,7 @@
 //! is bolted there; its hemispherical end reaches below the base plate by construction). Every
 //! other capsule is checked against every surface, and the base capsule against the walls,
 //! ceiling and keep-outs (a lab config that puts the base too near a wall is refused too).
-//! Each rule is its own function over the setpoint profile ([`Ticks`]): `joint_limit_rule`,
+//! Each rule is its own function over the setpoint profile (`Ticks`): `joint_limit_rule`,
 //! `joint_derivative_rule`, `tcp_speed_rule` and `clearance_rule`; `check_ticks` runs them in
 //! that order (one forward-kinematics pass feeds the last two).
 //!

@@ -15,7 +15,7 @@
 //! stops the streams, writes the saved state back and removes the file.
 
 use std::sync::atomic::{AtomicBool, AtomicU64, AtomicU8, Ordering};
-use std::sync::OnceLock;
+use std::sync::{Arc, OnceLock};
 use std::time::Duration;
 
 use crossbeam_channel::{Receiver, RecvTimeoutError, Sender, TryRecvError};
@@ -347,8 +347,8 @@ impl<B: CameraSdk> Worker<B> {
                         TimestampSource::HostArrival
                     },
                     intrinsics: s.k,
-                    color,
-                    depth_m,
+                    color: Arc::new(color),
+                    depth_m: Arc::new(depth_m),
                     mask: None,
                 };
                 if self.shared.frames.force_push(frame).is_some() {

@@ -276,7 +276,9 @@ impl PoseEstimator for OnnxEstimator {
                     )));
                 }
                 let mut masked = frame.clone();
-                masked.mask = Some(m.iter().map(|&v| if v >= 0.5 { 255 } else { 0 }).collect());
+                masked.mask = Some(
+                    m.iter().map(|&v| if v >= 0.5 { 255 } else { 0 }).collect::<Vec<_>>().into(),
+                );
                 drop(outputs);
                 match self.tracker.as_mut() {
                     Some(t) => t.estimate(&masked),

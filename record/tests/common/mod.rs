@@ -30,17 +30,17 @@ pub fn frame(k: u64, t_ns: u64, with_pose: bool) -> FrameRecord {
         color: Some(Plane {
             width: W,
             height: H,
-            data: (0..n * 3).map(|i| (i % 251) as u8).collect(),
+            data: (0..n * 3).map(|i| (i % 251) as u8).collect::<Vec<_>>().into(),
         }),
         depth: Some(DepthImage::Metres(Plane {
             width: W,
             height: H,
-            data: (0..n).map(|i| depth_value(k, i)).collect(),
+            data: (0..n).map(|i| depth_value(k, i)).collect::<Vec<_>>().into(),
         })),
         mask: Some(Plane {
             width: W,
             height: H,
-            data: (0..n).map(|i| if i % 2 == 0 { 255 } else { 0 }).collect(),
+            data: (0..n).map(|i| if i % 2 == 0 { 255 } else { 0 }).collect::<Vec<_>>().into(),
         }),
         gt_pose: with_pose.then_some(gt),
         tf: Some(tf_at(t_ns, k)),
