@@ -51,19 +51,22 @@ pub struct CheckArgs {
     /// Plan and check the approach from these joints (7 comma-separated radians) instead of the
     /// lab's rest pose (`[arm] rest_q`): where the arm will be when the run starts.
     #[arg(long, value_name = "Q", value_parser = parse_joints, allow_hyphen_values = true)]
-    pub from: Option<[f64; 7]>,
+    pub from: Option<hitl_hal::Joints>,
     /// Print one JSON object (the full report, or an `error`) instead of the human report.
     #[arg(long)]
     pub json: bool,
 }
 
 /// Seven comma-separated joint angles, radians: `--from`.
-pub fn parse_joints(s: &str) -> Result<[f64; 7], String> {
+pub fn parse_joints(s: &str) -> Result<hitl_hal::Joints, String> {
     let parts: Vec<&str> = s.split(',').collect();
-    if parts.len() != 7 {
-        return Err(format!("'{s}': expected 7 comma-separated joint angles in radians"));
+    if parts.len() != hitl_hal::DOF {
+        return Err(format!(
+            "'{s}': expected {} comma-separated joint angles in radians",
+            hitl_hal::DOF
+        ));
     }
-    let mut q = [0.0; 7];
+    let mut q = [0.0; hitl_hal::DOF];
     for (v, p) in q.iter_mut().zip(parts) {
         *v = p
             .trim()
@@ -81,10 +84,10 @@ pub fn parse_joints(s: &str) -> Result<[f64; 7], String> {
 pub fn plan_moves(
     table: &SetpointTable,
     lab: &LabConfig,
-    from: &[f64; 7],
+    from: &hitl_hal::Joints,
 ) -> [(&'static str, Result<PlannedMove, String>); 2] {
     let last = table.q[table.ticks() - 1];
-    let plan = |name, a: &[f64; 7], b: &[f64; 7]| {
+    let plan = |name, a: &hitl_hal::Joints, b: &hitl_hal::Joints| {
         plan_safe_move(name, a, b, lab, table.rate_hz).map_err(|e| e.to_string())
     };
     [
@@ -94,7 +97,7 @@ pub fn plan_moves(
 }
 
 /// Where `from` is, for people: the rest pose or the joints given.
-fn from_name(from: Option<&[f64; 7]>) -> String {
+fn from_name(from: Option<&hitl_hal::Joints>) -> String {
     match from {
         None => "the rest pose ([arm] rest_q)".into(),
         Some(q) => {
@@ -106,7 +109,7 @@ fn from_name(from: Option<&[f64; 7]>) -> String {
 /// The moves' lines for people, and whether all can be made.
 pub fn describe_moves(
     moves: &[(&'static str, Result<PlannedMove, String>)],
-    from: Option<&[f64; 7]>,
+    from: Option<&hitl_hal::Joints>,
 ) -> (String, bool) {
     let mut s = String::new();
     let mut ok = true;

@@ -34,7 +34,7 @@ pub struct ParkArgs {
     /// where a stopped run left it. Refused with --arm.
     #[arg(long, value_name = "Q", value_parser = crate::cli::check::parse_joints,
           allow_hyphen_values = true)]
-    pub stub_start_q: Option<[f64; 7]>,
+    pub stub_start_q: Option<hitl_hal::Joints>,
     /// Print plain progress lines even on a terminal.
     #[arg(long)]
     pub plain: bool,

@@ -96,7 +96,7 @@ pub struct RunArgs {
     /// instead of its resting pose, e.g. where a previous run left the arm. Refused with --arm.
     #[arg(long, value_name = "Q", value_parser = crate::cli::check::parse_joints,
           allow_hyphen_values = true)]
-    pub stub_start_q: Option<[f64; 7]>,
+    pub stub_start_q: Option<hitl_hal::Joints>,
     /// Leave the arm where the trajectory ends. By default a completed run goes back to the lab's
     /// rest pose (`[arm] rest_q`) along a planned, checked path, so the next run starts from rest.
     #[arg(long)]

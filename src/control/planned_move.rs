@@ -211,8 +211,8 @@ fn time_and_check(
         via_ticks: ends,
     };
     profile.q.push(*from);
-    profile.qd.push([0.0; 7]);
-    profile.qdd.push([0.0; 7]);
+    profile.qd.push([0.0; hitl_hal::DOF]);
+    profile.qdd.push([0.0; hitl_hal::DOF]);
     for s in &setpoints {
         profile.q.push(s.q);
         profile.qd.push(s.qd);

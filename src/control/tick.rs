@@ -501,7 +501,7 @@ mod light_lead_tests {
     #[test]
     fn a_capture_sees_the_scheduled_level_once_the_lead_has_passed() {
         let p = Program {
-            approach: vec![JointState::rest([0.0; 7]); 3],
+            approach: vec![JointState::rest([0.0; hitl_hal::DOF]); 3],
             light: vec![0.2, 0.2, 0.6, 0.6, 1.0],
             light_lead_ticks: 2,
             ..Program::default()

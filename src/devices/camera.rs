@@ -127,11 +127,6 @@ impl fmt::Display for CameraSpec {
     }
 }
 
-/// The Orbbec Gemini-class stream (1280x800, f = 640 px), for builds without the stub's presets.
-#[cfg(not(feature = "stub"))]
-const ORBBEC_STREAM: Intrinsics =
-    Intrinsics { width: 1280, height: 800, fx: 640.0, fy: 640.0, cx: 640.0, cy: 400.0 };
-
 /// The stream the run asks of `spec`: the `--camera-preset` intrinsics (scaled to
 /// `--camera-size`), and a target mask where the camera can give one (only the simulated one).
 pub fn stream_config(
@@ -163,7 +158,7 @@ fn preset_intrinsics(preset: &str, size: Option<(u32, u32)>) -> Result<Intrinsic
                 .into(),
         ));
     }
-    Ok(ORBBEC_STREAM)
+    Ok(hitl_drivers::orbbec::profiles::GEMINI_STREAM)
 }
 
 /// The fastest capture rate the camera `spec` follows, Hz, with why, for the preflight's

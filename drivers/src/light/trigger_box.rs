@@ -471,8 +471,13 @@ impl Light for TriggerBox {
         self.shared.level.store(u32::from(level_permille(level)), Ordering::Release);
         Ok(())
     }
+}
 
-    fn strobe(&mut self, level: f32, duration_us: u32) -> Result<(), SerialError> {
+impl TriggerBox {
+    /// Flash the light at `level` for `duration_us` microseconds, now (the box's `S` command).
+    /// Not part of the hal's `Light`: a run flashes with its captures through the strobe line
+    /// ([`Trigger::fire`]), timed by the box. Kept as the box's own command.
+    pub fn strobe(&mut self, level: f32, duration_us: u32) -> Result<(), SerialError> {
         check_level(level)?;
         if duration_us == 0 {
             return Err(SerialError::new(

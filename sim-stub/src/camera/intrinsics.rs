@@ -10,9 +10,8 @@ pub enum Preset {
     Nfov,
     /// The paper's wide field of view: 1280x1024, f = 1545 px, principal point (640, 512).
     Wfov,
-    /// An Orbbec Gemini-class RGB-D stream: 1280x800, f = 640 px (about 90 x 64 degrees, the
-    /// wide depth field of the Gemini 2/300 family), principal point at the image centre. The
-    /// values are typical, not a calibration of any unit.
+    /// The Orbbec camera's stream, as its driver defines it
+    /// ([`hitl_drivers::orbbec::profiles::GEMINI_STREAM`]: 1280x800, f = 640 px).
     Orbbec,
 }
 
@@ -32,7 +31,7 @@ impl Preset {
         match self {
             Self::Nfov => square(1280, 1024, 7315.0, 640.0, 512.0),
             Self::Wfov => square(1280, 1024, 1545.0, 640.0, 512.0),
-            Self::Orbbec => square(1280, 800, 640.0, 640.0, 400.0),
+            Self::Orbbec => hitl_drivers::orbbec::profiles::GEMINI_STREAM,
         }
     }
 
