@@ -87,7 +87,15 @@ fn record(path: &Path, n: u64, estimates: bool) {
         let frame = FrameRecord {
             tick: 25 * k,
             capture_ns: t,
-            intrinsics: Intrinsics { width: w, height: h, fx: 80.0, fy: 80.0, cx: 32.0, cy: 24.0 },
+            intrinsics: Intrinsics {
+                width: w,
+                height: h,
+                fx: 80.0,
+                fy: 80.0,
+                cx: 32.0,
+                cy: 24.0,
+                distortion: Default::default(),
+            },
             color: Some(Plane { width: w, height: h, data: noise(px * 3, k) }),
             depth: Some(DepthImage::Metres(Plane { width: w, height: h, data: vec![0.5; px] })),
             mask: Some(Plane { width: w, height: h, data: vec![255; px] }),

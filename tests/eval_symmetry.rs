@@ -40,7 +40,15 @@ fn write_recording(path: &Path, target: &str, twin: Pose) {
         let frame = FrameRecord {
             tick: k as u64 * 25,
             capture_ns: t,
-            intrinsics: Intrinsics { width: 16, height: 16, fx: 20.0, fy: 20.0, cx: 8.0, cy: 8.0 },
+            intrinsics: Intrinsics {
+                width: 16,
+                height: 16,
+                fx: 20.0,
+                fy: 20.0,
+                cx: 8.0,
+                cy: 8.0,
+                distortion: Default::default(),
+            },
             color: Some(Plane { width: 16, height: 16, data: vec![40; 16 * 16 * 3] }),
             depth: Some(DepthImage::Metres(Plane { width: 16, height: 16, data: vec![1.0; 256] })),
             mask: Some(Plane { width: 16, height: 16, data: vec![255; 256] }),

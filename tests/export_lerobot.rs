@@ -178,7 +178,15 @@ fn synthetic(path: &Path, n: u64, (w, h): (u32, u32), depth_m: impl Fn(u64) -> f
         let frame = FrameRecord {
             tick: 10 * k,
             capture_ns: t,
-            intrinsics: Intrinsics { width: w, height: h, fx: 30.0, fy: 30.0, cx: 16.0, cy: 12.0 },
+            intrinsics: Intrinsics {
+                width: w,
+                height: h,
+                fx: 30.0,
+                fy: 30.0,
+                cx: 16.0,
+                cy: 12.0,
+                distortion: Default::default(),
+            },
             color: Some(Plane { width: w, height: h, data: vec![(k * 20) as u8; px * 3] }),
             depth: Some(DepthImage::Metres(Plane { width: w, height: h, data: depth })),
             mask: Some(Plane { width: w, height: h, data: mask }),

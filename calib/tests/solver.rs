@@ -11,7 +11,15 @@ use hitl_trajectories::lab::{BoardPlacement, LabConfig};
 use nalgebra::{Isometry3, Translation3, UnitQuaternion};
 
 fn intrinsics() -> Intrinsics {
-    Intrinsics { width: 640, height: 400, fx: 320.0, fy: 320.0, cx: 319.5, cy: 199.5 }
+    Intrinsics {
+        width: 640,
+        height: 400,
+        fx: 320.0,
+        fy: 320.0,
+        cx: 319.5,
+        cy: 199.5,
+        distortion: Default::default(),
+    }
 }
 
 /// A small deterministic normal generator (LCG + Box-Muller).

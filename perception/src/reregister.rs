@@ -148,7 +148,15 @@ mod tests {
         PerceptionFrame {
             timestamp_ns: seq,
             seq,
-            intrinsics: Intrinsics { width: 1, height: 1, fx: 1.0, fy: 1.0, cx: 0.0, cy: 0.0 },
+            intrinsics: Intrinsics {
+                width: 1,
+                height: 1,
+                fx: 1.0,
+                fy: 1.0,
+                cx: 0.0,
+                cy: 0.0,
+                distortion: Default::default(),
+            },
             color: vec![],
             depth_m: vec![1.0],
             mask: None,

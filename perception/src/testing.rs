@@ -17,6 +17,7 @@ pub fn intrinsics_hfov(width: u32, height: u32, hfov_deg: f64) -> Intrinsics {
         fy: fx,
         cx: (width as f64 - 1.0) / 2.0,
         cy: (height as f64 - 1.0) / 2.0,
+        distortion: Default::default(),
     }
 }
 

@@ -47,7 +47,15 @@ fn frame(seq: u64) -> PerceptionFrame {
     PerceptionFrame {
         timestamp_ns: 1000 + seq,
         seq,
-        intrinsics: Intrinsics { width: 2, height: 1, fx: 1.0, fy: 1.0, cx: 0.5, cy: 0.0 },
+        intrinsics: Intrinsics {
+            width: 2,
+            height: 1,
+            fx: 1.0,
+            fy: 1.0,
+            cx: 0.5,
+            cy: 0.0,
+            distortion: Default::default(),
+        },
         color: vec![],
         depth_m: vec![1.0, 1.0],
         mask: None,

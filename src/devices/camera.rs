@@ -129,8 +129,15 @@ impl fmt::Display for CameraSpec {
 
 /// The Orbbec Gemini-class stream (1280x800, f = 640 px), for builds without the stub's presets.
 #[cfg(not(feature = "stub"))]
-const ORBBEC_STREAM: Intrinsics =
-    Intrinsics { width: 1280, height: 800, fx: 640.0, fy: 640.0, cx: 640.0, cy: 400.0 };
+const ORBBEC_STREAM: Intrinsics = Intrinsics {
+    width: 1280,
+    height: 800,
+    fx: 640.0,
+    fy: 640.0,
+    cx: 640.0,
+    cy: 400.0,
+    distortion: hitl_hal::Distortion::NONE,
+};
 
 /// The stream the run asks of `spec`: the `--camera-preset` intrinsics (scaled to
 /// `--camera-size`), and a target mask where the camera can give one (only the simulated one).
@@ -265,6 +272,7 @@ pub fn open_camera(
             let sim = ctx.sim_needed("camera")?;
             let config = SimCameraConfig {
                 intrinsics: stream.intrinsics,
+                lens: sim.camera_lens,
                 clock: ctx.clock,
                 noise: sim.camera_noise,
                 ..Default::default()

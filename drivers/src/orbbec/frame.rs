@@ -94,6 +94,7 @@ pub fn check_intrinsics(
         fy: f64::from(fy),
         cx: f64::from(cx),
         cy: f64::from(cy),
+        distortion: Default::default(),
     })
 }
 
@@ -197,7 +198,15 @@ mod tests {
     use proptest::prelude::*;
 
     fn k(w: u32, h: u32) -> Intrinsics {
-        Intrinsics { width: w, height: h, fx: 10.0, fy: 10.0, cx: 1.0, cy: 1.0 }
+        Intrinsics {
+            width: w,
+            height: h,
+            fx: 10.0,
+            fy: 10.0,
+            cx: 1.0,
+            cy: 1.0,
+            distortion: Default::default(),
+        }
     }
 
     fn meta(w: u32, h: u32, format: i32) -> FrameMeta {

@@ -26,7 +26,15 @@ pub fn frame(k: u64, t_ns: u64, with_pose: bool) -> FrameRecord {
     FrameRecord {
         tick: k * 10,
         capture_ns: t_ns,
-        intrinsics: Intrinsics { width: W, height: H, fx: 20.0, fy: 20.0, cx: 8.0, cy: 4.0 },
+        intrinsics: Intrinsics {
+            width: W,
+            height: H,
+            fx: 20.0,
+            fy: 20.0,
+            cx: 8.0,
+            cy: 4.0,
+            distortion: Default::default(),
+        },
         color: Some(Plane {
             width: W,
             height: H,
