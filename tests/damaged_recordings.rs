@@ -107,6 +107,7 @@ fn record(path: &Path, n: u64, estimates: bool) {
                 base_target: pose,
             }),
             trigger_ns: Some(t - 1_000_000),
+            light_level: None,
         };
         assert!(tel.push_frame(frame), "frame {k} dropped");
         if estimates {

@@ -49,6 +49,7 @@ fn write_recording(path: &Path, scale: Option<f64>) {
             gt_pose: Some(gt(k)),
             tf: None,
             trigger_ns: None,
+            light_level: None,
         };
         assert!(tel.push_frame(frame));
         let error = match k {

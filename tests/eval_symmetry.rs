@@ -55,6 +55,7 @@ fn write_recording(path: &Path, target: &str, twin: Pose) {
             gt_pose: Some(gt(k)),
             tf: None,
             trigger_ns: None,
+            light_level: None,
         };
         assert!(tel.push_frame(frame));
         let error = match k {

@@ -198,6 +198,7 @@ fn synthetic(path: &Path, n: u64, (w, h): (u32, u32), depth_m: impl Fn(u64) -> f
                 base_target: pose,
             }),
             trigger_ns: Some(t - 1_000_000),
+            light_level: None,
         };
         assert!(tel.push_frame(frame));
         tel.push_pose_estimate(&PoseStamped { capture_ns: t, pose });

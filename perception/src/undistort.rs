@@ -2,7 +2,7 @@
 //! model of the camera is a pinhole `K` (the FoundationPose socket peer), which then see every
 //! pixel where a pinhole with the frame's `K` would have seen it.
 //!
-//! Each output pixel reads the input where the lens put its ray ([`Intrinsics::project`] of the
+//! Each output pixel reads the input where the lens put its ray ([`hitl_hal::Intrinsics::project`] of the
 //! pinhole pixel's ray): colour bilinearly, depth and mask at the nearest pixel (a blend of two
 //! depths is a surface that is not there; the mask keeps whole pixels and stays consistent with
 //! the depth). Depth is the z-depth along the optical axis, the same wherever the lens puts the
@@ -10,7 +10,6 @@
 //! The pose a backend finds in the result is in the same camera frame as the input's.
 
 use crate::PerceptionFrame;
-use hitl_hal::Intrinsics;
 use std::borrow::Cow;
 
 /// `frame` as the pinhole with its `K` would see it: the frame itself (no copy) when its
@@ -84,7 +83,7 @@ impl PerceptionFrame {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use hitl_hal::Distortion;
+    use hitl_hal::{Distortion, Intrinsics};
 
     fn frame(k: Intrinsics) -> PerceptionFrame {
         let n = (k.width * k.height) as usize;

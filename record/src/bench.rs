@@ -117,6 +117,7 @@ fn frame(k: u32, depth: &[Vec<u16>], color: &[Vec<u8>], t_ns: u64) -> FrameRecor
         gt_pose: None,
         tf: None,
         trigger_ns: Some(t_ns),
+        light_level: None,
     }
 }
 

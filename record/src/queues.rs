@@ -242,6 +242,7 @@ mod tests {
             gt_pose: None,
             tf: None,
             trigger_ns: None,
+            light_level: None,
         }
     }
 

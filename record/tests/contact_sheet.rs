@@ -67,6 +67,7 @@ fn frame(k: u64, t: u64, w: u32, h: u32, with_mask: bool) -> FrameRecord {
         gt_pose: Some(gt_pose()),
         tf: None,
         trigger_ns: Some(t - 1_000_000),
+        light_level: None,
     }
 }
 

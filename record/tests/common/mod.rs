@@ -54,6 +54,7 @@ pub fn frame(k: u64, t_ns: u64, with_pose: bool) -> FrameRecord {
         tf: Some(tf_at(t_ns, k)),
         // The trigger fired 2 ms + k us before the exposure.
         trigger_ns: Some(t_ns.saturating_sub(2_000_000 + 1000 * k)),
+        light_level: None,
     }
 }
 
