@@ -87,7 +87,7 @@ fn record(path: &Path, n: u64, estimates: bool) {
         let frame = FrameRecord {
             tick: 25 * k,
             capture_ns: t,
-            intrinsics: Intrinsics { width: w, height: h, fx: 80.0, fy: 80.0, cx: 32.0, cy: 24.0 },
+            intrinsics: Intrinsics::pinhole(w, h, 80.0, 80.0, 32.0, 24.0),
             color: Some(Plane { width: w, height: h, data: noise(px * 3, k).into() }),
             depth: Some(DepthImage::Metres(Plane {
                 width: w,
@@ -103,6 +103,7 @@ fn record(path: &Path, n: u64, estimates: bool) {
                 base_target: pose,
             }),
             trigger_ns: Some(t - 1_000_000),
+            light_level: None,
         };
         assert!(tel.push_frame(frame), "frame {k} dropped");
         if estimates {

@@ -34,13 +34,22 @@ fn write_recording(path: &Path, scale: Option<f64>) {
         let frame = FrameRecord {
             tick: k as u64 * 25,
             capture_ns: t,
-            intrinsics: Intrinsics { width: 8, height: 8, fx: 10.0, fy: 10.0, cx: 4.0, cy: 4.0 },
+            intrinsics: Intrinsics {
+                width: 8,
+                height: 8,
+                fx: 10.0,
+                fy: 10.0,
+                cx: 4.0,
+                cy: 4.0,
+                distortion: Default::default(),
+            },
             color: None,
             depth: None,
             mask: None,
             gt_pose: Some(gt(k)),
             tf: None,
             trigger_ns: None,
+            light_level: None,
         };
         assert!(tel.push_frame(frame));
         let error = match k {

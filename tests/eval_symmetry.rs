@@ -40,7 +40,7 @@ fn write_recording(path: &Path, target: &str, twin: Pose) {
         let frame = FrameRecord {
             tick: k as u64 * 25,
             capture_ns: t,
-            intrinsics: Intrinsics { width: 16, height: 16, fx: 20.0, fy: 20.0, cx: 8.0, cy: 8.0 },
+            intrinsics: Intrinsics::pinhole(16, 16, 20.0, 20.0, 8.0, 8.0),
             color: Some(Plane { width: 16, height: 16, data: vec![40; 16 * 16 * 3].into() }),
             depth: Some(DepthImage::Metres(Plane {
                 width: 16,
@@ -51,6 +51,7 @@ fn write_recording(path: &Path, target: &str, twin: Pose) {
             gt_pose: Some(gt(k)),
             tf: None,
             trigger_ns: None,
+            light_level: None,
         };
         assert!(tel.push_frame(frame));
         let error = match k {

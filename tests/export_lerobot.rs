@@ -178,7 +178,7 @@ fn synthetic(path: &Path, n: u64, (w, h): (u32, u32), depth_m: impl Fn(u64) -> f
         let frame = FrameRecord {
             tick: 10 * k,
             capture_ns: t,
-            intrinsics: Intrinsics { width: w, height: h, fx: 30.0, fy: 30.0, cx: 16.0, cy: 12.0 },
+            intrinsics: Intrinsics::pinhole(w, h, 30.0, 30.0, 16.0, 12.0),
             color: Some(Plane { width: w, height: h, data: vec![(k * 20) as u8; px * 3].into() }),
             depth: Some(DepthImage::Metres(Plane { width: w, height: h, data: depth.into() })),
             mask: Some(Plane { width: w, height: h, data: mask.into() }),
@@ -190,6 +190,7 @@ fn synthetic(path: &Path, n: u64, (w, h): (u32, u32), depth_m: impl Fn(u64) -> f
                 base_target: pose,
             }),
             trigger_ns: Some(t - 1_000_000),
+            light_level: None,
         };
         assert!(tel.push_frame(frame));
         tel.push_pose_estimate(&PoseStamped { capture_ns: t, pose });

@@ -63,8 +63,9 @@ fn one_image_set_and_one_ground_truth_per_capture_and_the_truth_lands_on_the_mas
         rec.capture_sync.iter().map(|s| s.sync_error_ns.abs()).max().unwrap_or(0) as f64 / 1e6;
     assert!(out.contains(&format!("max {max_ms:.2} ms")), "max {max_ms:.2} ms not in: {out}");
 
-    // WFOV at 320x256: f = 1545 * 320 / 1280, principal point at the centre.
-    let (f, cx, cy) = (1545.0 * 320.0 / 1280.0, 160.0, 128.0);
+    // WFOV at 320x256: f = 1545 * 320 / 1280, principal point (640, 512) of 1280x1024 scaled
+    // with the pixel centres (hitl_hal::Intrinsics::scaled): (640.5 / 4 - 0.5, 512.5 / 4 - 0.5).
+    let (f, cx, cy) = (1545.0 * 320.0 / 1280.0, 159.625, 127.625);
     let mut masks: BTreeMap<u64, (u32, u32, u32, Vec<u8>)> = BTreeMap::new();
     visit(
         &mcap,
@@ -103,7 +104,7 @@ fn one_image_set_and_one_ground_truth_per_capture_and_the_truth_lands_on_the_mas
             let q = nalgebra::Point3::new(f64::from(p[0]), f64::from(p[1]), f64::from(p[2]));
             let [x, y, z]: [f64; 3] = gt.pose.transform_point(&q).coords.into();
             assert!(z > 0.0, "the target is in front of the camera");
-            let (u, v) = (f * x / z + cx - 0.5, f * y / z + cy - 0.5);
+            let (u, v) = (f * x / z + cx, f * y / z + cy);
             plo = [plo[0].min(u), plo[1].min(v)];
             phi = [phi[0].max(u), phi[1].max(v)];
         }

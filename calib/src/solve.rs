@@ -106,8 +106,9 @@ pub struct Solution {
     pub corners: usize,
 }
 
+/// Where `k` (through its lens) sees `p`, in front of the camera.
 fn project(k: &Intrinsics, p: &Point3<f64>) -> Option<(f64, f64)> {
-    (p.z > 1e-6).then(|| (k.fx * p.x / p.z + k.cx, k.fy * p.y / p.z + k.cy))
+    (p.z > 1e-6).then(|| k.project(p.x, p.y, p.z))
 }
 
 fn increment(d: &[f64]) -> Pose {
@@ -144,7 +145,8 @@ pub fn planar_pose(corners: &[Corner], k: &Intrinsics) -> Option<Pose> {
     let mut a = DMatrix::<f64>::zeros(2 * n, 9);
     for (i, p) in corners.iter().enumerate() {
         let q = (p.board.coords.xy() - c) / s;
-        let (x, y) = ((p.pixel.0 - k.cx) / k.fx, (p.pixel.1 - k.cy) / k.fy);
+        // The corner's ray, the lens's distortion removed: the homography is a pinhole's.
+        let (x, y) = k.unproject(p.pixel.0, p.pixel.1);
         let h = [q.x, q.y, 1.0];
         for j in 0..3 {
             a[(2 * i, j)] = h[j];

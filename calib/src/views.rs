@@ -100,7 +100,7 @@ pub fn board_pixels(
             if c.z <= 0.05 {
                 return None;
             }
-            out.push((k.fx * c.x / c.z + k.cx, k.fy * c.y / c.z + k.cy));
+            out.push(k.project(c.x, c.y, c.z));
         }
     }
     Some(out)

@@ -12,7 +12,15 @@ use nalgebra::{Isometry3, Matrix3, Matrix4, Translation3, UnitQuaternion, Vector
 use std::process::Command;
 
 fn k() -> Intrinsics {
-    Intrinsics { width: 640, height: 400, fx: 320.0, fy: 320.0, cx: 319.5, cy: 199.5 }
+    Intrinsics {
+        width: 640,
+        height: 400,
+        fx: 320.0,
+        fy: 320.0,
+        cx: 319.5,
+        cy: 199.5,
+        distortion: Default::default(),
+    }
 }
 
 fn to_json(p: &Isometry3<f64>) -> serde_json::Value {

@@ -11,7 +11,15 @@ use hitl_trajectories::lab::{BoardPlacement, LabConfig};
 use nalgebra::{Isometry3, Translation3, UnitQuaternion};
 
 fn intrinsics() -> Intrinsics {
-    Intrinsics { width: 640, height: 400, fx: 320.0, fy: 320.0, cx: 319.5, cy: 199.5 }
+    Intrinsics {
+        width: 640,
+        height: 400,
+        fx: 320.0,
+        fy: 320.0,
+        cx: 319.5,
+        cy: 199.5,
+        distortion: Default::default(),
+    }
 }
 
 /// A small deterministic normal generator (LCG + Box-Muller).
@@ -35,7 +43,19 @@ fn observe(
     true_z: &Isometry3<f64>,
     sigma_px: f64,
 ) -> Vec<View> {
-    let k = intrinsics();
+    observe_through(&intrinsics(), lab, board, true_x, true_z, sigma_px)
+}
+
+/// [`observe`] by a camera with intrinsics `k` (its lens included).
+fn observe_through(
+    k: &Intrinsics,
+    lab: &LabConfig,
+    board: &Board,
+    true_x: &Isometry3<f64>,
+    true_z: &Isometry3<f64>,
+    sigma_px: f64,
+) -> Vec<View> {
+    let k = *k;
     let (planned, _) = views::plan_views(lab, board, &k, &ViewPlan::default());
     let mut noise = Noise(7);
     planned
@@ -47,8 +67,9 @@ fn observe(
             for t in 0..board.tag_count() {
                 for p in board.corners(t) {
                     let c = cam_board * p;
-                    let u = k.fx * c.x / c.z + k.cx + sigma_px * noise.normal();
-                    let w = k.fy * c.y / c.z + k.cy + sigma_px * noise.normal();
+                    let (u, w) = k.project(c.x, c.y, c.z);
+                    let u = u + sigma_px * noise.normal();
+                    let w = w + sigma_px * noise.normal();
                     corners.push(Corner { board: p, pixel: (u, w) });
                 }
             }
@@ -100,6 +121,26 @@ fn exact_corners_give_the_true_mount_and_board() {
     let (dt, dr) = solve::pose_difference(&sol.shah_camera_mount, &x);
     assert!(dt < 1e-6 && dr < 1e-5, "closed form camera mount off by {dt} m, {dr} deg");
     assert!(sol.rms_px < 1e-5, "{}", sol.rms_px);
+}
+
+#[test]
+fn corners_seen_through_a_lens_are_solved_through_it() {
+    // A Gemini-class lens: at the 640x400 image's corners it moves a corner by several pixels.
+    let (lab, board, x, z) = setup();
+    let lens = hitl_hal::Distortion::brown_conrady([-0.08, 0.05, 0.0012, -0.0009, -0.01]);
+    let k = intrinsics().with_distortion(lens);
+    let obs = observe_through(&k, &lab, &board, &x, &z, 0.0);
+    let acc = Acceptance { max_sigma_mm: 1.0, max_sigma_deg: 1.0, ..Acceptance::default() };
+    let sol = solve::solve(&obs, &k, &acc).expect("solved");
+    let (dt, dr) = solve::pose_difference(&sol.camera_mount, &x);
+    assert!(dt < 1e-6 && dr < 1e-5, "camera mount off by {dt} m, {dr} deg");
+    let (dt, dr) = solve::pose_difference(&sol.board_in_base, &z);
+    assert!(dt < 1e-6 && dr < 1e-5, "board off by {dt} m, {dr} deg");
+    assert!(sol.rms_px < 1e-4, "{}", sol.rms_px);
+    // The same corners solved as a pinhole's are pixels off: the lens matters.
+    let acc = Acceptance { max_rms_px: 100.0, max_sigma_mm: 100.0, max_sigma_deg: 100.0, ..acc };
+    let pin = solve::solve(&obs, &intrinsics(), &acc).expect("solved as a pinhole");
+    assert!(pin.rms_px > 0.2, "a pinhole fits the lens's corners to {} px", pin.rms_px);
 }
 
 #[test]

@@ -70,7 +70,15 @@ impl Double {
 }
 
 fn intrinsics() -> Intrinsics {
-    Intrinsics { width: W, height: H, fx: 10.0, fy: 10.0, cx: 4.0, cy: 3.0 }
+    Intrinsics {
+        width: W,
+        height: H,
+        fx: 10.0,
+        fy: 10.0,
+        cx: 4.0,
+        cy: 3.0,
+        distortion: Default::default(),
+    }
 }
 
 impl CameraSdk for Double {

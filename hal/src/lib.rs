@@ -14,6 +14,7 @@ pub mod camera;
 pub mod clock;
 pub mod error;
 pub mod inputs;
+pub mod lens;
 pub mod lifecycle;
 pub mod light;
 pub mod motion;
@@ -27,6 +28,7 @@ pub use camera::{
 pub use clock::{Clock, MonotonicClock};
 pub use error::{Error, ErrorKind, ErrorType};
 pub use inputs::{InputState, Inputs};
+pub use lens::{Distortion, DistortionModel};
 pub use lifecycle::Lifecycle;
 pub use light::Light;
 pub use motion::{JointState, Phase};

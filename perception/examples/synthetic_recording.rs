@@ -35,6 +35,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
             gt_pose: Some(gt),
             tf: None,
             trigger_ns: None,
+            light_level: None,
         });
         let mut est = gt;
         if i > 0 {

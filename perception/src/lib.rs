@@ -25,6 +25,7 @@ pub mod reregister;
 pub mod silhouette;
 pub mod socket;
 pub mod testing;
+pub mod undistort;
 pub mod worker;
 
 pub use backends::{backend_from_spec, BackendSpec};

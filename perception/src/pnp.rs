@@ -31,8 +31,7 @@ pub fn solve_pnp(
     {
         return Err(PerceptionError::BadInput("PnP: non-finite input".into()));
     }
-    let rays: Vec<(f64, f64)> =
-        pixels.iter().map(|(u, v)| ((u - k.cx) / k.fx, (v - k.cy) / k.fy)).collect();
+    let rays: Vec<(f64, f64)> = pixels.iter().map(|(u, v)| k.unproject(*u, *v)).collect();
     let init = dlt(body, &rays)?;
     Ok(refine(body, &rays, init))
 }

@@ -148,7 +148,7 @@ mod tests {
         PerceptionFrame {
             timestamp_ns: seq,
             seq,
-            intrinsics: Intrinsics { width: 1, height: 1, fx: 1.0, fy: 1.0, cx: 0.0, cy: 0.0 },
+            intrinsics: Intrinsics::pinhole(1, 1, 1.0, 1.0, 0.0, 0.0),
             color: vec![].into(),
             depth_m: vec![1.0].into(),
             mask: None,

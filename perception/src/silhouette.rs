@@ -123,7 +123,8 @@ impl SilhouetteRenderer {
                 let mut poly = [Vector3::zeros(); 4];
                 let m = clip_near(&tri, &mut poly);
                 for q in &poly[..m] {
-                    bx.add(k.fx * q.x / q.z + k.cx, k.fy * q.y / q.z + k.cy);
+                    let (u, v) = k.project(q.x, q.y, q.z);
+                    bx.add(u, v);
                 }
             }
         }
@@ -315,7 +316,7 @@ fn fill(
     owner: &mut [u8],
 ) {
     let w = k.width as usize;
-    let uv = p.map(|q| (k.fx * q.x / q.z + k.cx, k.fy * q.y / q.z + k.cy));
+    let uv = p.map(|q| k.project(q.x, q.y, q.z));
     let area = edge(uv[0], uv[1], uv[2]);
     if area.abs() < 1e-12 || !area.is_finite() {
         return;

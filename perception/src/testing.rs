@@ -17,6 +17,7 @@ pub fn intrinsics_hfov(width: u32, height: u32, hfov_deg: f64) -> Intrinsics {
         fy: fx,
         cx: (width as f64 - 1.0) / 2.0,
         cy: (height as f64 - 1.0) / 2.0,
+        distortion: Default::default(),
     }
 }
 
@@ -35,8 +36,7 @@ pub fn render(mesh: &Mesh, pose: &Pose, k: &Intrinsics, timestamp_ns: u64) -> Pe
         if p.iter().any(|q| q.z <= 1e-6) {
             continue;
         }
-        let uv: Vec<(f64, f64)> =
-            p.iter().map(|q| (k.fx * q.x / q.z + k.cx, k.fy * q.y / q.z + k.cy)).collect();
+        let uv: Vec<(f64, f64)> = p.iter().map(|q| k.project(q.x, q.y, q.z)).collect();
         let area = edge(uv[0], uv[1], uv[2]);
         if area.abs() < 1e-12 {
             continue;

@@ -38,6 +38,7 @@ fn recorded_frames_replay_through_the_tracker() {
             gt_pose: Some(gt),
             tf: None,
             trigger_ns: None,
+            light_level: None,
         };
         while !tel.frame_queue_has_room() {
             std::thread::sleep(std::time::Duration::from_millis(2));

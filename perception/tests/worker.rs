@@ -47,7 +47,7 @@ fn frame(seq: u64) -> PerceptionFrame {
     PerceptionFrame {
         timestamp_ns: 1000 + seq,
         seq,
-        intrinsics: Intrinsics { width: 2, height: 1, fx: 1.0, fy: 1.0, cx: 0.5, cy: 0.0 },
+        intrinsics: Intrinsics::pinhole(2, 1, 1.0, 1.0, 0.5, 0.0),
         color: vec![].into(),
         depth_m: vec![1.0, 1.0].into(),
         mask: None,

@@ -105,6 +105,7 @@ fn frame(k: u32, depth: &[Vec<u16>], color: &[Vec<u8>], t_ns: u64) -> FrameRecor
             fy: 900.0,
             cx: 640.0,
             cy: 400.0,
+            distortion: Default::default(),
         },
         color: Some(Plane { width: COLOR_W, height: COLOR_H, data: color[i].clone().into() }),
         depth: Some(DepthImage::Millimetres(Plane {
@@ -116,6 +117,7 @@ fn frame(k: u32, depth: &[Vec<u16>], color: &[Vec<u8>], t_ns: u64) -> FrameRecor
         gt_pose: None,
         tf: None,
         trigger_ns: Some(t_ns),
+        light_level: None,
     }
 }
 

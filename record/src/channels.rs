@@ -92,8 +92,10 @@ pub(crate) fn ts(ns: u64) -> Option<fg::Timestamp> {
     Some(fg::Timestamp::new(sec, (ns % 1_000_000_000) as u32))
 }
 
-/// The calibration of a registered stream (no distortion, R = I) at time `t`, for its image
-/// shrunk by a whole `factor` (1: as captured; pixel centres map as (c + 0.5) / factor - 0.5).
+/// The calibration of a registered stream (its lens's distortion `D` and model, R = I) at time
+/// `t`, for its image shrunk by a whole `factor` (1: as captured; pixel centres map as
+/// (c + 0.5) / factor - 0.5, [`Intrinsics::scaled`]'s convention; the distortion acts on
+/// normalised coordinates and is the same at every size).
 pub(crate) fn calibration(i: &Intrinsics, t: u64, factor: u32) -> fg::CameraCalibration {
     let s = f64::from(factor.max(1));
     let (fx, fy) = (i.fx / s, i.fy / s);
@@ -103,8 +105,8 @@ pub(crate) fn calibration(i: &Intrinsics, t: u64, factor: u32) -> fg::CameraCali
         frame_id: topics::FRAME_CAMERA.to_string(),
         width: i.width / factor.max(1),
         height: i.height / factor.max(1),
-        distortion_model: "plumb_bob".to_string(),
-        d: vec![0.0; 5],
+        distortion_model: i.distortion.model.name().to_string(),
+        d: i.distortion.d().to_vec(),
         k: vec![fx, 0.0, cx, 0.0, fy, cy, 0.0, 0.0, 1.0],
         r: vec![1.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 1.0],
         p: vec![fx, 0.0, cx, 0.0, 0.0, fy, cy, 0.0, 0.0, 0.0, 1.0, 0.0],

@@ -65,18 +65,24 @@ pub struct TimingMsg {
 
 /// `/camera/sync`: when a capture was triggered, when it was exposed, and the difference (the
 /// hard sync's error; positive when the exposure came after the trigger). Host monotonic ns.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+/// With the light level in effect at the exposure (0..1), where the run drove a light.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
 pub struct CaptureSyncMsg {
     pub tick: u64,
     pub trigger_ns: u64,
     pub exposure_ns: u64,
     pub sync_error_ns: i64,
+    /// The level the light was at for this exposure: the trajectory's level at the capture's
+    /// tick, which went out `[light] lead_ms` earlier so the lamp shows it at the exposure
+    /// (docs/lights.md). Absent in recordings made before it was recorded.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub light_level: Option<f32>,
 }
 
 impl CaptureSyncMsg {
     pub fn new(tick: u64, trigger_ns: u64, exposure_ns: u64) -> Self {
         let sync_error_ns = Self::error_ns(trigger_ns, exposure_ns);
-        CaptureSyncMsg { tick, trigger_ns, exposure_ns, sync_error_ns }
+        CaptureSyncMsg { tick, trigger_ns, exposure_ns, sync_error_ns, light_level: None }
     }
 
     /// The sync error: exposure minus trigger, nanoseconds (the one definition, also used for the
@@ -299,6 +305,8 @@ pub struct FrameRecord {
     /// When the tick fired the trigger (host monotonic ns): with `capture_ns` it gives the frame's
     /// `/camera/sync` record. `None` writes none.
     pub trigger_ns: Option<u64>,
+    /// The light level in effect at the exposure, for `/camera/sync` (`None`: not known).
+    pub light_level: Option<f32>,
 }
 
 impl FrameRecord {
@@ -320,6 +328,7 @@ impl FrameRecord {
             gt_pose: None,
             tf: None,
             trigger_ns: Some(fired_ns),
+            light_level: None,
         }
     }
 }

@@ -227,13 +227,22 @@ mod tests {
         FrameRecord {
             tick,
             capture_ns: 1000 + tick,
-            intrinsics: Intrinsics { width: 1, height: 1, fx: 1.0, fy: 1.0, cx: 0.0, cy: 0.0 },
+            intrinsics: Intrinsics {
+                width: 1,
+                height: 1,
+                fx: 1.0,
+                fy: 1.0,
+                cx: 0.0,
+                cy: 0.0,
+                distortion: Default::default(),
+            },
             color: None,
             depth: None,
             mask: None,
             gt_pose: None,
             tf: None,
             trigger_ns: None,
+            light_level: None,
         }
     }
 

@@ -15,7 +15,7 @@ use crate::msg::{
 };
 use crate::topics;
 use foxglove::messages as fg;
-use hitl_hal::{pose, Intrinsics, Pose};
+use hitl_hal::{pose, Distortion, DistortionModel, Intrinsics, Pose};
 use mcap::records::Record;
 use mcap::sans_io::linear_reader::{LinearReadEvent, LinearReader, LinearReaderOptions};
 use mcap::sans_io::summary_reader::{SummaryReadEvent, SummaryReader, SummaryReaderOptions};
@@ -420,6 +420,8 @@ pub enum CalibrationError {
     /// Decoded, but its K matrix is not 9 finite numbers with positive focal lengths, or its
     /// image size is zero.
     NoUsableK,
+    /// Nonzero `D` of a model not known (its name), or of the wrong count for its model.
+    UnknownDistortion(String, usize),
 }
 
 impl std::fmt::Display for CalibrationError {
@@ -427,6 +429,11 @@ impl std::fmt::Display for CalibrationError {
         match self {
             Self::Undecodable(e) => write!(f, "undecodable /camera/calibration: {e}"),
             Self::NoUsableK => f.write_str("a /camera/calibration has no usable K matrix"),
+            Self::UnknownDistortion(model, n) => write!(
+                f,
+                "a /camera/calibration's distortion is {n} coefficients of model {model:?} (known: \
+                 plumb_bob with 5, rational_polynomial with 8, all finite)"
+            ),
         }
     }
 }
@@ -448,6 +455,15 @@ pub fn decode_intrinsics(
     if !usable {
         return Err(CalibrationError::NoUsableK);
     }
+    // The lens: `D` in its model's count; a recording written before lenses were recorded (all
+    // zeros), or without `D`, is a pinhole.
+    let distortion = if c.d.iter().all(|v| *v == 0.0) {
+        Distortion::NONE
+    } else {
+        DistortionModel::from_name(&c.distortion_model)
+            .and_then(|m| Distortion::from_d(m, &c.d))
+            .ok_or(CalibrationError::UnknownDistortion(c.distortion_model.clone(), c.d.len()))?
+    };
     let k = Intrinsics {
         width: c.width,
         height: c.height,
@@ -455,6 +471,7 @@ pub fn decode_intrinsics(
         fy: c.k[4],
         cx: c.k[2],
         cy: c.k[5],
+        distortion,
     };
     Ok((ts_ns(c.timestamp).unwrap_or(log_time), k))
 }
@@ -602,10 +619,22 @@ mod tests {
 
     #[test]
     fn intrinsics_are_what_the_recorder_wrote_and_bad_ones_are_named() {
-        let k = Intrinsics { width: 640, height: 400, fx: 500.0, fy: 501.0, cx: 320.5, cy: 199.5 };
+        let k = Intrinsics::pinhole(640, 400, 500.0, 501.0, 320.5, 199.5);
         let data = crate::channels::calibration(&k, 7, 1).encode_to_vec();
         let (t, back) = decode_intrinsics(&data, 99).expect("decodes");
         assert_eq!((t, back), (7, k));
+        // The lens's five numbers and its model come back as written.
+        let lens = k.with_distortion(Distortion::brown_conrady([-0.1, 0.02, 1e-3, -2e-3, 0.004]));
+        let msg = crate::channels::calibration(&lens, 7, 1);
+        assert_eq!(msg.distortion_model, "plumb_bob");
+        assert_eq!(msg.d, vec![-0.1, 0.02, 1e-3, -2e-3, 0.004]);
+        let (_, back) = decode_intrinsics(&msg.encode_to_vec(), 99).expect("decodes");
+        assert_eq!(back, lens);
+        let odd = fg::CameraCalibration { distortion_model: "equidistant".into(), ..msg };
+        assert!(matches!(
+            decode_intrinsics(&odd.encode_to_vec(), 99),
+            Err(CalibrationError::UnknownDistortion(m, 5)) if m == "equidistant"
+        ));
         let zero_fx = Intrinsics { fx: 0.0, ..k };
         let data = crate::channels::calibration(&zero_fx, 7, 1).encode_to_vec();
         assert!(matches!(decode_intrinsics(&data, 99), Err(CalibrationError::NoUsableK)));

@@ -280,7 +280,11 @@ impl McapSink {
         let mut bad = Vec::new();
         self.proto(Ch::Calibration, t, &calibration(&f.intrinsics, t, 1))?;
         if let Some(trigger_ns) = f.trigger_ns {
-            self.json(Ch::CaptureSync, t, &CaptureSyncMsg::new(f.tick, trigger_ns, t))?;
+            let sync = CaptureSyncMsg {
+                light_level: f.light_level,
+                ..CaptureSyncMsg::new(f.tick, trigger_ns, t)
+            };
+            self.json(Ch::CaptureSync, t, &sync)?;
         }
         if let Some(tf) = &f.tf {
             let mut tf = *tf;

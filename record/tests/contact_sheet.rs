@@ -30,7 +30,15 @@ fn square() -> TargetMesh {
 /// [19.5, 43.5] at 96x64, pixels 36..=59 x 20..=43.
 fn intrinsics(w: u32, h: u32) -> Intrinsics {
     let s = f64::from(w) / 96.0;
-    Intrinsics { width: w, height: h, fx: 80.0 * s, fy: 80.0 * s, cx: 47.5 * s, cy: 31.5 * s }
+    Intrinsics {
+        width: w,
+        height: h,
+        fx: 80.0 * s,
+        fy: 80.0 * s,
+        cx: 47.5 * s,
+        cy: 31.5 * s,
+        distortion: Default::default(),
+    }
 }
 
 fn gt_pose() -> Pose {
@@ -59,6 +67,7 @@ fn frame(k: u64, t: u64, w: u32, h: u32, with_mask: bool) -> FrameRecord {
         gt_pose: Some(gt_pose()),
         tf: None,
         trigger_ns: Some(t - 1_000_000),
+        light_level: None,
     }
 }
 

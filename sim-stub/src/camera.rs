@@ -25,12 +25,14 @@
 pub mod bench;
 pub mod gl;
 pub mod intrinsics;
+pub mod lens;
 pub mod noise;
 pub mod render;
 
 pub use bench::bench_render;
 pub use gl::GlRenderer;
 pub use intrinsics::Preset;
+pub use lens::{LensCache, LensMap};
 pub use noise::{DepthModel, FrameNoise, NoiseModel, StereoDepth};
 pub use render::{Image, Renderer, Shading};
 
@@ -38,8 +40,8 @@ use crate::mujoco_plant::{ArmSample, LabModel, SharedArmState};
 use crossbeam::atomic::AtomicCell;
 use crossbeam::channel::{self, Receiver, Sender, TryRecvError, TrySendError};
 use hitl_hal::{
-    CaptureRequest, Clock, ErrorKind, ErrorType, Intrinsics, Joints, MonotonicClock, Pose,
-    RgbdCamera, RgbdFrame, StreamConfig, TimestampSource,
+    CaptureRequest, Clock, Distortion, ErrorKind, ErrorType, Intrinsics, Joints, MonotonicClock,
+    Pose, RgbdCamera, RgbdFrame, StreamConfig, TimestampSource,
 };
 use std::sync::atomic::{AtomicU64, Ordering};
 use std::sync::Arc;
@@ -100,7 +102,12 @@ pub enum RendererKind {
 /// How the simulated camera runs.
 #[derive(Debug, Clone)]
 pub struct SimCameraConfig {
+    /// The stream asked for; its distortion is replaced by [`Self::lens`].
     pub intrinsics: Intrinsics,
+    /// The simulated lens (the lab's `[camera] distortion`): every frame is rendered through
+    /// it and the camera announces it in its intrinsics, as a real camera's factory calibration
+    /// (docs/sim-camera.md). [`Distortion::NONE`]: a pinhole.
+    pub lens: Distortion,
     pub renderer: RendererKind,
     pub noise: NoiseModel,
     pub shading: Shading,
@@ -114,6 +121,7 @@ impl Default for SimCameraConfig {
     fn default() -> Self {
         Self {
             intrinsics: Preset::Orbbec.at(640, 400),
+            lens: Distortion::NONE,
             renderer: RendererKind::default(),
             noise: NoiseModel::default(),
             shading: Shading::default(),
@@ -173,6 +181,7 @@ pub struct SimCamera {
     frames: Receiver<(RgbdFrame, RenderTruth)>,
     thread: Option<JoinHandle<()>>,
     intrinsics: Intrinsics,
+    lens: Distortion,
     mask: bool,
     armed: bool,
     last_truth: Option<RenderTruth>,
@@ -195,11 +204,15 @@ impl SimCamera {
         light: LightLevel,
         config: SimCameraConfig,
     ) -> Result<Self, SimCameraError> {
-        if let Some(e) = intrinsics::check(&config.intrinsics).or_else(|| config.noise.check()) {
+        let k = config.intrinsics.with_distortion(config.lens);
+        let refused = intrinsics::check(&k)
+            .or_else(|| lens::check(&k, &config.lens))
+            .or_else(|| config.noise.check());
+        if let Some(e) = refused {
             return Err(SimCameraError::Config(e));
         }
         let (req_tx, req_rx) = channel::bounded(config.queue.max(1));
-        let stream = Arc::new(AtomicCell::new(config.intrinsics));
+        let stream = Arc::new(AtomicCell::new(k));
         let (frame_tx, frame_rx) = channel::bounded(config.queue.max(1) + 2);
         let dropped = Arc::new(AtomicU64::new(0));
         let (ready_tx, ready_rx) = channel::bounded(1);
@@ -211,6 +224,7 @@ impl SimCamera {
             renderer,
             noise: config.noise,
             stream: worker_stream,
+            lens: LensCache::default(),
             frames: frame_tx,
             dropped: worker_dropped,
         };
@@ -241,7 +255,8 @@ impl SimCamera {
             stream,
             frames: frame_rx,
             thread: Some(thread),
-            intrinsics: config.intrinsics,
+            intrinsics: k,
+            lens: config.lens,
             mask: true,
             armed: false,
             last_truth: None,
@@ -288,13 +303,16 @@ impl ErrorType for SimCamera {
 }
 
 impl RgbdCamera for SimCamera {
+    /// Returns the stream asked for with the camera's own lens: the distortion it renders
+    /// through, whatever the request said (a real camera's factory calibration is not asked).
     fn configure(&mut self, config: &StreamConfig) -> Result<Intrinsics, SimCameraError> {
-        if let Some(e) = intrinsics::check(&config.intrinsics) {
+        let k = config.intrinsics.with_distortion(self.lens);
+        if let Some(e) = intrinsics::check(&k).or_else(|| lens::check(&k, &self.lens)) {
             return Err(SimCameraError::Config(e));
         }
         // The render thread uses it from the next capture it takes.
-        self.stream.store(config.intrinsics);
-        self.intrinsics = config.intrinsics;
+        self.stream.store(k);
+        self.intrinsics = k;
         self.mask = config.mask;
         Ok(self.intrinsics)
     }
@@ -431,6 +449,8 @@ struct Worker {
     renderer: Backend,
     noise: NoiseModel,
     stream: Arc<AtomicCell<Intrinsics>>,
+    /// The remap of the stream's lens, built once.
+    lens: LensCache,
     frames: Sender<(RgbdFrame, RenderTruth)>,
     dropped: Arc<AtomicU64>,
 }
@@ -452,10 +472,14 @@ impl Worker {
         let mut noise = self.noise.draw(request.tick);
         let intr = self.stream.load();
         let (image, truth) = match &mut self.renderer {
-            Backend::RayCast(r) => render_capture(r, &sample.q, &intr, level, &mut noise),
+            Backend::RayCast(r) => {
+                let Ok(out) =
+                    capture_through(&mut **r, &sample.q, &intr, level, &mut noise, &mut self.lens);
+                out
+            }
             Backend::Mujoco(r) => {
                 r.set_capture_tick(request.tick); // the `orbit` Sun at this capture
-                capture_with(&mut **r, &sample.q, &intr, level, &mut noise)
+                capture_through(&mut **r, &sample.q, &intr, level, &mut noise, &mut self.lens)
                     .map_err(|e| e.to_string())?
             }
         };
@@ -493,7 +517,7 @@ pub fn render_capture(
 }
 
 /// Render one capture with `renderer` at joints `q` with the frame's noise; the truth's tick
-/// and time are left for the caller to fill.
+/// and time are left for the caller to fill. Through `intr`'s lens, if it has one.
 pub fn capture_with<R: Draw + ?Sized>(
     renderer: &mut R,
     q: &Joints,
@@ -501,10 +525,29 @@ pub fn capture_with<R: Draw + ?Sized>(
     level: f32,
     noise: &mut FrameNoise,
 ) -> Result<(Image, RenderTruth), R::Error> {
+    capture_through(renderer, q, intr, level, noise, &mut LensCache::default())
+}
+
+/// [`capture_with`], keeping the lens's remap in `lens` for the next capture: a pinhole is
+/// rendered directly; a distorted stream is rendered on its pinhole canvas and remapped
+/// ([`lens`]).
+pub fn capture_through<R: Draw + ?Sized>(
+    renderer: &mut R,
+    q: &Joints,
+    intr: &Intrinsics,
+    level: f32,
+    noise: &mut FrameNoise,
+    lens: &mut LensCache,
+) -> Result<(Image, RenderTruth), R::Error> {
     renderer.set_joints(q);
     let camera = renderer.camera_in_lab();
     let rendered = camera * noise.rotation;
-    let mut image = renderer.render_from(&rendered, intr, level, noise.shift_px)?;
+    let mut image = match lens.get(intr) {
+        None => renderer.render_from(&rendered, intr, level, noise.shift_px)?,
+        Some(map) => {
+            map.remap(&renderer.render_from(&rendered, &map.canvas, level, noise.shift_px)?)
+        }
+    };
     noise.apply_depth(&mut image.depth_m, &image.intrinsics);
     let base_inv = renderer.base_in_lab().inverse();
     let truth = RenderTruth {

@@ -85,7 +85,15 @@ fn tilted_and_off_centre_cameras_see_what_the_ray_cast_sees() {
         (
             "off-centre",
             camera,
-            Intrinsics { width: 160, height: 128, fx: 420.0, fy: 380.0, cx: 95.0, cy: 50.0 },
+            Intrinsics {
+                width: 160,
+                height: 128,
+                fx: 420.0,
+                fy: 380.0,
+                cx: 95.0,
+                cy: 50.0,
+                distortion: Default::default(),
+            },
             [0.0, 0.0],
         ),
         ("shifted", camera, Preset::Wfov.at(160, 128), [7.0, -5.0]),

@@ -255,6 +255,8 @@ impl Worker {
             let mut rec = FrameRecord::from_rgbd(frame);
             rec.gt_pose = Some(gt);
             rec.tf = Some(self.frames.tf(rec.capture_ns, &q));
+            // The level the light was at for this exposure (the tick's, sent a lead earlier).
+            rec.light_level = capture.map(|c| c.light_level).filter(|l| l.is_finite());
             let deadline = std::time::Instant::now() + Duration::from_secs(2);
             while !record.frame_queue_has_room() && std::time::Instant::now() < deadline {
                 std::thread::sleep(Duration::from_millis(5));

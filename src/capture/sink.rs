@@ -196,7 +196,7 @@ mod tests {
             device_ns: 0,
             exposure_ns: 0,
             timestamp: TimestampSource::HostArrival,
-            intrinsics: Intrinsics { width: 2, height: 2, fx: 1.0, fy: 1.0, cx: 1.0, cy: 1.0 },
+            intrinsics: Intrinsics::pinhole(2, 2, 1.0, 1.0, 1.0, 1.0),
             color: vec![7; 12].into(),
             depth_m: vec![1.0; 4].into(),
             mask: None,

@@ -260,6 +260,7 @@ pub fn open_camera(
             let sim = ctx.sim_needed("camera")?;
             let config = SimCameraConfig {
                 intrinsics: stream.intrinsics,
+                lens: sim.camera_lens,
                 clock: ctx.clock,
                 noise: sim.camera_noise,
                 ..Default::default()

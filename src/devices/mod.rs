@@ -52,6 +52,8 @@ pub struct SimScene<'a> {
     pub inputs: hitl_sim_stub::SimInputsReader,
     /// The simulated camera's noise and depth model.
     pub camera_noise: hitl_sim_stub::camera::NoiseModel,
+    /// The simulated camera's lens, which it announces in its intrinsics.
+    pub camera_lens: hitl_hal::Distortion,
 }
 
 /// `--depth-model`: how the simulated camera's depth is degraded (docs/sim-camera.md).
@@ -300,6 +302,7 @@ mod tests {
                 fy: 40.0,
                 cx: 32.0,
                 cy: 24.0,
+                distortion: Default::default(),
             },
             mask: false,
         };

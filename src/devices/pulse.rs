@@ -193,7 +193,7 @@ mod tests {
             device_ns: 7,
             exposure_ns,
             timestamp: TimestampSource::HostArrival,
-            intrinsics: Intrinsics { width: 1, height: 1, fx: 1.0, fy: 1.0, cx: 0.0, cy: 0.0 },
+            intrinsics: Intrinsics::pinhole(1, 1, 1.0, 1.0, 0.0, 0.0),
             color: vec![0; 3].into(),
             depth_m: vec![0.0].into(),
             mask: None,

@@ -20,6 +20,8 @@ pub struct EmbeddedStub {
     arm: SharedArmState,
     light: hitl_sim_stub::camera::LightLevel,
     camera_noise: hitl_sim_stub::camera::NoiseModel,
+    /// The simulated camera's lens (the stub lab's `[camera] distortion`).
+    camera_lens: hitl_hal::Distortion,
 }
 
 /// Start the stub on loopback for `lab`, with `target` (in model units) shown at `scale`, the
@@ -65,6 +67,10 @@ pub fn start_stub(
         arm,
         light: Default::default(),
         camera_noise: Default::default(),
+        camera_lens: lab
+            .camera
+            .distortion
+            .map_or(hitl_hal::Distortion::NONE, |d| hitl_hal::Distortion::brown_conrady(d)),
     })
 }
 
@@ -139,6 +145,7 @@ impl EmbeddedStub {
             light: &self.light,
             inputs: self.handle.inputs(),
             camera_noise: self.camera_noise,
+            camera_lens: self.camera_lens,
         }
     }
 

@@ -7,7 +7,7 @@
 //! frame by frame, by [`crate::export::video`].
 
 use super::ExportError;
-use hitl_hal::{Pose, DOF};
+use hitl_hal::{Intrinsics, Pose, DOF};
 use hitl_record::reader::{self, CalibrationError, Recording};
 use hitl_record::topics;
 use std::collections::{BTreeMap, BTreeSet};
@@ -67,6 +67,9 @@ pub struct Frame {
     pub target_estimate: Option<Pose>,
     /// fx, fy, cx, cy in pixels (`/camera/calibration`).
     pub intrinsics: Option<[f64; 4]>,
+    /// The lens's distortion, OpenCV's order `k1, k2, p1, p2, k3, k4, k5, k6` (zeros: a pinhole;
+    /// the last three zero for the five-coefficient model), from the same message.
+    pub distortion: Option<[f64; 8]>,
 }
 
 /// What the recording's metadata says about the run (null where it does not say).
@@ -102,6 +105,10 @@ pub struct EpisodeMeta {
     pub image_size: [u32; 2],
     /// Intrinsics of the first frame: fx, fy, cx, cy.
     pub intrinsics: Option<[f64; 4]>,
+    /// The first frame's lens distortion model (`plumb_bob`, `rational_polynomial`).
+    pub distortion_model: Option<String>,
+    /// Its coefficients, `k1, k2, p1, p2, k3, k4, k5, k6`.
+    pub distortion: Option<[f64; 8]>,
     /// Captures left out because one of their images was not recorded.
     pub incomplete_captures: usize,
 }
@@ -137,7 +144,7 @@ struct ImageIndex {
     times: BTreeMap<Stream, BTreeSet<u64>>,
     sizes: BTreeSet<(u32, u32)>,
     bad_encoding: Option<(Stream, String)>,
-    intrinsics: BTreeMap<u64, [f64; 4]>,
+    intrinsics: BTreeMap<u64, Intrinsics>,
     undecodable: Option<(String, String)>,
 }
 
@@ -165,9 +172,13 @@ fn index_images(path: &Path) -> Result<ImageIndex, ExportError> {
             } else if m.topic == topics::CALIBRATION {
                 match reader::decode_intrinsics(m.data, m.log_time) {
                     Ok((t, k)) => {
-                        ix.intrinsics.insert(t, [k.fx, k.fy, k.cx, k.cy]);
+                        ix.intrinsics.insert(t, k);
                     }
                     Err(CalibrationError::NoUsableK) => {}
+                    Err(e @ CalibrationError::UnknownDistortion(..)) => {
+                        ix.undecodable = Some((m.topic.to_string(), e.to_string()));
+                        return ControlFlow::Break(());
+                    }
                     Err(CalibrationError::Undecodable(e)) => {
                         ix.undecodable = Some((m.topic.to_string(), e.to_string()));
                         return ControlFlow::Break(());
@@ -225,7 +236,8 @@ pub fn read_episode(path: &Path) -> Result<Episode, ExportError> {
         )));
     }
     let frames: Vec<Frame> = times.iter().map(|&t| frame_at(&rec, &ix.intrinsics, t)).collect();
-    let meta = episode_meta(path, &rec, (width, height), &frames, incomplete);
+    let first_lens = frames.iter().find_map(|f| ix.intrinsics.get(&f.capture_ns));
+    let meta = episode_meta(path, &rec, (width, height), &frames, first_lens, incomplete);
     Ok(Episode { path: path.to_path_buf(), frames, streams, width, height, meta })
 }
 
@@ -250,7 +262,7 @@ fn exact<T>(v: &[T], t: u64, key: impl Fn(&T) -> u64) -> Option<&T> {
     v.get(i).filter(|x| key(x) == t)
 }
 
-fn frame_at(rec: &Recording, intrinsics: &BTreeMap<u64, [f64; 4]>, t: u64) -> Frame {
+fn frame_at(rec: &Recording, intrinsics: &BTreeMap<u64, Intrinsics>, t: u64) -> Frame {
     let nan7 = [f64::NAN; DOF];
     let tick = exact(&rec.capture_sync, t, |s| s.exposure_ns)
         .or_else(|| rec.capture_sync.iter().find(|s| s.exposure_ns == t))
@@ -273,7 +285,8 @@ fn frame_at(rec: &Recording, intrinsics: &BTreeMap<u64, [f64; 4]>, t: u64) -> Fr
         camera_pose,
         target_gt: exact(&rec.pose_gt, t, |p| p.capture_ns).map(|p| p.pose),
         target_estimate: exact(&rec.pose_estimate, t, |p| p.capture_ns).map(|p| p.pose),
-        intrinsics: intrinsics.get(&t).copied(),
+        intrinsics: intrinsics.get(&t).map(|k| [k.fx, k.fy, k.cx, k.cy]),
+        distortion: intrinsics.get(&t).map(|k| k.distortion.coefficients),
     }
 }
 
@@ -282,6 +295,7 @@ fn episode_meta(
     rec: &Recording,
     (w, h): (u32, u32),
     frames: &[Frame],
+    first_lens: Option<&Intrinsics>,
     incomplete: usize,
 ) -> EpisodeMeta {
     let run = rec.metadata.get(topics::META_RUN);
@@ -317,6 +331,8 @@ fn episode_meta(
         target_size_lab_m: target_size_m.zip(scale).map(|(s, k)| s * k),
         image_size: [w, h],
         intrinsics: frames.iter().find_map(|f| f.intrinsics),
+        distortion_model: first_lens.map(|k| k.distortion.model.name().to_string()),
+        distortion: first_lens.map(|k| k.distortion.coefficients),
         incomplete_captures: incomplete,
     }
 }

@@ -515,6 +515,14 @@ fn frames_table(episodes: &[Episode], tasks: &[String], fps: u32) -> (Table, Map
         feature("float32", 4, Some(&["fx", "fy", "cx", "cy"][..])),
     );
     add(
+        "observation.camera_distortion",
+        Column::F32s(
+            8,
+            rows(&|f| f.distortion.map_or([f32::NAN; 8], |d| d.map(|v| v as f32)).to_vec()),
+        ),
+        feature("float32", 8, Some(&["k1", "k2", "p1", "p2", "k3", "k4", "k5", "k6"][..])),
+    );
+    add(
         "capture_time_s",
         Column::F64(
             episodes
@@ -618,6 +626,14 @@ fn episodes_table(
         Column::F64s(
             4,
             episodes.iter().flat_map(|e| e.meta.intrinsics.unwrap_or([f64::NAN; 4])).collect(),
+        ),
+    );
+    t.push("hitl/distortion_model", m(&|e| e.meta.distortion_model.clone()));
+    t.push(
+        "hitl/distortion",
+        Column::F64s(
+            8,
+            episodes.iter().flat_map(|e| e.meta.distortion.unwrap_or([f64::NAN; 8])).collect(),
         ),
     );
     t.push(

@@ -161,6 +161,12 @@ pub struct CameraMount {
     pub body: CameraBody,
     /// Nearest the optical centre may come to the target centre, metres. Default 0.06.
     pub min_target_distance_m: f64,
+    /// The lens's distortion, OpenCV's five Brown-Conrady coefficients `[k1, k2, p1, p2, k3]`.
+    /// Absent (the default): a pinhole. Only the stub's simulated camera reads it, rendering
+    /// through it and announcing it as a real camera announces its factory calibration; the
+    /// controller takes a camera's distortion from the camera itself (docs/sim-camera.md).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub distortion: Option<[f64; 5]>,
 }
 
 impl Default for CameraMount {
@@ -170,6 +176,7 @@ impl Default for CameraMount {
             rpy_deg: [0.0, 0.0, 0.0],
             body: CameraBody::default(),
             min_target_distance_m: 0.06,
+            distortion: None,
         }
     }
 }
@@ -533,6 +540,10 @@ impl LabConfig {
         if let Some(m) = self.target.model_size_m {
             rules.push(Rule::one("target.model_size_m", m, Positive));
         }
+        if let Some(d) = &self.camera.distortion {
+            // Wider than any lens a Gemini-class camera has (|k1| about 0.1, |p| about 1e-3).
+            rules.push(Rule::each("camera.distortion", d, Within(-1.0, 1.0)));
+        }
         if let Some(lead) = self.light.lead_ms {
             rules.push(Rule::one("light.lead_ms", lead, Within(0.0, 1000.0)));
         }
@@ -754,6 +765,8 @@ mod tests {
             ("[arm]\nrest_q = [7, -0.5, 0, 0.9, 0, 1.4, 0]\n", "arm.rest_q[0] = 7 must be in"),
             ("[light]\nlead_ms = -1\n", "light.lead_ms = -1 must be in [0, 1000]"),
             ("[light]\nlead_ms = 1500\n", "light.lead_ms = 1500 must be in [0, 1000]"),
+            ("[camera]\ndistortion = [0, 0, 0, 2, 0]\n", "camera.distortion[3] = 2 must be in"),
+            ("[camera]\ndistortion = [0, 0, 0]\n", "distortion"),
         ] {
             let e = LabConfig::from_toml(text).expect_err(text).to_string();
             assert!(e.contains(key), "{text}: {e}");
@@ -766,6 +779,13 @@ mod tests {
         let c = LabConfig::from_toml("[light]\nlead_ms = 0\n").expect("no lead");
         assert_eq!(c.light.lead_ms, Some(0.0));
         assert_eq!(LabConfig::default().light.lead_ms, None, "the light kind's default");
+        let c = LabConfig::from_toml("[camera]\ndistortion = [-0.1, 0.05, 0.001, -0.002, 0]\n")
+            .expect("a lens");
+        assert_eq!(c.camera.distortion, Some([-0.1, 0.05, 0.001, -0.002, 0.0]));
+        // Written back only when there is one (a pinhole lab's file is as before).
+        let back = LabConfig::from_toml(&c.to_toml()).expect("reads back");
+        assert_eq!(back.camera.distortion, c.camera.distortion);
+        assert!(!LabConfig::default().to_toml().contains("distortion"));
     }
 
     #[test]

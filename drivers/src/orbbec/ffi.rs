@@ -581,7 +581,7 @@ impl Profile {
         })
     }
 
-    /// The lens distortion the SDK reports for this profile (read for commissioning only).
+    /// The lens distortion the SDK reports for this profile.
     pub fn distortion(&self) -> Result<ObCameraDistortion, SdkError> {
         // SAFETY: `self.ptr` is a live video stream profile; the struct is returned by value.
         self.sdk.call("ob_video_stream_profile_get_distortion", |e| unsafe {
@@ -978,7 +978,8 @@ impl Frame {
     }
 }
 
-/// The SDK's `Align` filter, set to align depth to the colour stream (D2C in software).
+/// The SDK's `Align` filter, set to align depth to the colour stream (D2C in software), into
+/// the colour image as the lens distorts it.
 pub struct AlignFilter {
     sdk: Arc<Sdk>,
     ptr: *mut ObFilter,
@@ -1001,6 +1002,14 @@ impl AlignFilter {
                 f64::from(OB_STREAM_COLOR),
                 e,
             )
+        })?;
+        // Register depth into the *distorted* colour image (the SDK's default projects it into
+        // undistorted colour coordinates while the colour image stays distorted): depth and
+        // colour then agree pixel for pixel, and both carry the colour lens's distortion.
+        let key = c"TargetDistortion";
+        // SAFETY: live filter; `key` is a valid C string; 1 is in the boolean's range.
+        sdk.call("ob_filter_set_config_value", |e| unsafe {
+            (api.ob_filter_set_config_value)(filter.ptr, key.as_ptr(), 1.0, e)
         })?;
         Ok(filter)
     }

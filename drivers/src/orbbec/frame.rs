@@ -3,7 +3,7 @@
 //! trusts a size, format, scale or timestamp from the camera, and nothing panics on any input
 //! (property tests below, and the fuzz target `orbbec_frame_meta`).
 
-use hitl_hal::{ErrorKind, Intrinsics};
+use hitl_hal::{Distortion, DistortionModel, ErrorKind, Intrinsics};
 
 use super::error::OrbbecError;
 
@@ -94,7 +94,44 @@ pub fn check_intrinsics(
         fy: f64::from(fy),
         cx: f64::from(cx),
         cy: f64::from(cy),
+        distortion: Default::default(),
     })
+}
+
+/// `ob_camera_distortion_model` values (ObTypes.h).
+pub const OB_DISTORTION_NONE: i32 = 0;
+pub const OB_DISTORTION_BROWN_CONRADY: i32 = 3;
+pub const OB_DISTORTION_BROWN_CONRADY_K6: i32 = 4;
+
+/// The lens distortion the SDK reported (`ob_camera_distortion`: `k1..k6`, `p1`, `p2`, model) as
+/// the HAL's: Brown-Conrady as OpenCV's five coefficients, its K6 form as OpenCV's rational
+/// model. The other models the SDK names (modified and inverse Brown-Conrady, Kannala-Brandt)
+/// are refused: read as one of these, every projection would be wrong at the image's edges.
+pub fn check_distortion(
+    k: [f32; 6],
+    p1: f32,
+    p2: f32,
+    model: i32,
+) -> Result<Distortion, OrbbecError> {
+    let c = |v: f32| f64::from(v);
+    let lens = match model {
+        OB_DISTORTION_NONE => Some(Distortion::NONE),
+        OB_DISTORTION_BROWN_CONRADY => {
+            Some(Distortion::brown_conrady([c(k[0]), c(k[1]), c(p1), c(p2), c(k[2])]))
+        }
+        OB_DISTORTION_BROWN_CONRADY_K6 => Distortion::from_d(
+            DistortionModel::RationalPolynomial,
+            &[c(k[0]), c(k[1]), c(p1), c(p2), c(k[2]), c(k[3]), c(k[4]), c(k[5])],
+        ),
+        other => {
+            return Err(bad(format!(
+                "colour lens distortion model {other} is not one hitl projects through (Brown-Conrady, \
+                 {OB_DISTORTION_BROWN_CONRADY}, or its K6 form, {OB_DISTORTION_BROWN_CONRADY_K6})"
+            )))
+        }
+    };
+    lens.filter(Distortion::is_finite)
+        .ok_or_else(|| bad(format!("colour lens distortion k {k:?} p1 {p1} p2 {p2} is not finite")))
 }
 
 /// The colour frame as rgb8 for `k` (exactly `width * height * 3` bytes, no row padding).
@@ -197,7 +234,15 @@ mod tests {
     use proptest::prelude::*;
 
     fn k(w: u32, h: u32) -> Intrinsics {
-        Intrinsics { width: w, height: h, fx: 10.0, fy: 10.0, cx: 1.0, cy: 1.0 }
+        Intrinsics {
+            width: w,
+            height: h,
+            fx: 10.0,
+            fy: 10.0,
+            cx: 1.0,
+            cy: 1.0,
+            distortion: Default::default(),
+        }
     }
 
     fn meta(w: u32, h: u32, format: i32) -> FrameMeta {
@@ -235,6 +280,20 @@ mod tests {
         // Global timestamps off: the arrival time, and it says so.
         let (.., stamp, exposure, _) = check_frameset(&set, &k(2, 1), false).expect("ok");
         assert_eq!((stamp, exposure), (5, false));
+    }
+
+    #[test]
+    fn the_sdk_s_lens_becomes_opencv_s_coefficients() {
+        let k = [0.125, -0.25, 0.01, 0.5, 0.25, 0.125];
+        let d = check_distortion(k, 0.001, -0.002, OB_DISTORTION_BROWN_CONRADY).expect("BC");
+        assert_eq!(d.model, DistortionModel::BrownConrady);
+        assert_eq!(d.d(), &[0.125, -0.25, f64::from(0.001f32), f64::from(-0.002f32), 0.01]);
+        let d = check_distortion(k, 0.0, 0.0, OB_DISTORTION_BROWN_CONRADY_K6).expect("K6");
+        assert_eq!(d.d(), &[0.125, -0.25, 0.0, 0.0, 0.01, 0.5, 0.25, 0.125]);
+        assert!(check_distortion(k, 0.0, 0.0, OB_DISTORTION_NONE).expect("none").is_none());
+        let e = check_distortion(k, 0.0, 0.0, 5).expect_err("Kannala-Brandt");
+        assert!(e.message().contains("model 5"), "{e}");
+        assert!(check_distortion([f32::NAN; 6], 0.0, 0.0, 3).is_err());
     }
 
     #[test]

@@ -152,7 +152,7 @@ impl CameraInfo {
             if let Some(d) = &l.distortion {
                 let _ = write!(
                     s,
-                    "; distortion {} k {:?} p1 {} p2 {} (printed only: hitl does not undistort)",
+                    "; distortion {} k {:?} p1 {} p2 {} (the colour lens is what runs project through)",
                     d.model_name(),
                     d.k,
                     d.p1,

@@ -13,8 +13,7 @@ use super::frame::{FORMAT_RGB, FORMAT_Y16};
 /// 1280x800, f = 640 px (about 90 x 64 degrees, the wide depth field of the Gemini 2/300 family),
 /// principal point at the image centre. Typical values, not a calibration of any unit; the
 /// simulated camera's `orbbec` preset is this stream.
-pub const GEMINI_STREAM: Intrinsics =
-    Intrinsics { width: 1280, height: 800, fx: 640.0, fy: 640.0, cx: 640.0, cy: 400.0 };
+pub const GEMINI_STREAM: Intrinsics = Intrinsics::pinhole(1280, 800, 640.0, 640.0, 640.0, 400.0);
 
 /// Frame rates tried first, in this order (the Gemini 305's common rates); then the highest
 /// rate both streams share.

@@ -16,7 +16,7 @@ use super::ffi::{
     OB_PROP_INTRA_CAMERA_SYNC_REFERENCE_INT, OB_PROP_USB_SYNC_VOLTAGE_LEVEL_INT, OB_SENSOR_COLOR,
     OB_SENSOR_DEPTH,
 };
-use super::frame::{check_intrinsics, FrameMeta, RawFrameset, RawImage};
+use super::frame::{check_distortion, check_intrinsics, FrameMeta, RawFrameset, RawImage};
 use super::profiles::VideoProfile;
 use super::sync::SyncConfig;
 
@@ -259,7 +259,12 @@ impl CameraSdk for SdkCamera {
     fn intrinsics(&mut self, color: VideoProfile) -> Result<Intrinsics, OrbbecError> {
         let p = self.find(OB_SENSOR_COLOR, color)?;
         let k = p.intrinsic().map_err(|e| OrbbecError::sdk("reading colour intrinsics", &e))?;
-        check_intrinsics(k.fx, k.fy, k.cx, k.cy, color.width, color.height)
+        // The colour lens's factory calibration: the aligned depth is registered into the
+        // distorted colour image (`AlignFilter`), so both carry it.
+        let d = p.distortion().map_err(|e| OrbbecError::sdk("reading colour distortion", &e))?;
+        let lens = check_distortion(d.k, d.p1, d.p2, d.model)?;
+        Ok(check_intrinsics(k.fx, k.fy, k.cx, k.cy, color.width, color.height)?
+            .with_distortion(lens))
     }
 
     fn advertised_sync_modes(&mut self) -> Result<u16, OrbbecError> {

@@ -45,7 +45,8 @@ pub fn scene(frame: &PerceptionFrame, max_points: usize, depth_window: f64) -> S
         .map(|&i| {
             let z = frame.depth_m[i] as f64;
             let (u, v) = ((i % w) as f64, (i / w) as f64);
-            Vector3::new((u - k.cx) / k.fx * z, (v - k.cy) / k.fy * z, z)
+            let (x, y) = k.unproject(u, v);
+            Vector3::new(x * z, y * z, z)
         })
         .collect();
     Scene { points, noise_m: depth_noise(frame, &idx, stride), far_m }

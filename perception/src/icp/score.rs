@@ -73,8 +73,8 @@ pub fn check_strided(
         if (r * n).dot(&q).abs() < GRAZING_COS * q.norm() {
             continue;
         }
-        let u = (k.fx * q.x / q.z + k.cx).round() as i64;
-        let v = (k.fy * q.y / q.z + k.cy).round() as i64;
+        let (u, v) = k.project(q.x, q.y, q.z);
+        let (u, v) = (u.round() as i64, v.round() as i64);
         if u < 0 || v < 0 || u >= w || v >= h {
             continue;
         }

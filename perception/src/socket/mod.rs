@@ -228,7 +228,8 @@ impl SocketEstimator {
         let limit = Limit { name: "frame timeout", value: config.frame_timeout };
         let deadline = Instant::now() + limit.value;
         buf.clear();
-        wire::encode_frame(buf, frame);
+        // The peer's camera model is a pinhole K: it gets the frame without the lens.
+        wire::encode_frame(buf, &crate::undistort::to_pinhole(frame));
         send(stream, buf, deadline, &ctx, limit)?;
         match receive(stream, deadline, &ctx, limit)? {
             Reply::Pose(p) => {

@@ -188,7 +188,8 @@ impl Silhouette {
 }
 
 /// The target's silhouette: `mesh` placed at `camera_T_target` = `pose` (OpenCV camera axes),
-/// projected with the pinhole `k` and filled triangle by triangle (scanlines through pixel
+/// projected through `k` (its lens distortion included: vertices are placed where the lens
+/// puts them, edges drawn straight between them) and filled triangle by triangle (scanlines through pixel
 /// centres). Triangles reaching behind the camera's near plane are left out.
 pub fn rasterize(mesh: &TargetMesh, pose: &Pose, k: &Intrinsics) -> Silhouette {
     let mut s = Silhouette::empty(k.width, k.height);
@@ -197,7 +198,7 @@ pub fn rasterize(mesh: &TargetMesh, pose: &Pose, k: &Intrinsics) -> Silhouette {
         .iter()
         .map(|v| {
             let p = pose.transform_point(&nalgebra::Point3::from(*v));
-            let (u, w) = (k.fx * p.x / p.z + k.cx, k.fy * p.y / p.z + k.cy);
+            let (u, w) = k.project(p.x, p.y, p.z);
             (p.z > NEAR_M && u.is_finite() && w.is_finite()).then_some([u, w])
         })
         .collect();
@@ -259,21 +260,6 @@ pub fn sheet_size(width: u32, height: u32, max_width: u32) -> (u32, u32) {
     }
     let h = (u64::from(height) * u64::from(max_width) + u64::from(width) / 2) / u64::from(width);
     (max_width.max(1), (h as u32).max(1))
-}
-
-/// `k` for the image shrunk to `width` x `height`: source pixel centre `x` lands on
-/// `(x + 0.5) * width / k.width - 0.5`, the box filter's bin of that pixel.
-pub fn scaled_intrinsics(k: &Intrinsics, width: u32, height: u32) -> Intrinsics {
-    let sx = f64::from(width) / f64::from(k.width.max(1));
-    let sy = f64::from(height) / f64::from(k.height.max(1));
-    Intrinsics {
-        width,
-        height,
-        fx: k.fx * sx,
-        fy: k.fy * sy,
-        cx: (k.cx + 0.5) * sx - 0.5,
-        cy: (k.cy + 0.5) * sy - 0.5,
-    }
 }
 
 /// Output bin of each source index: `floor((i + 0.5) * to / from)`.
@@ -504,7 +490,7 @@ pub fn write_contact_sheet(
         let (w, h) = (k.width, k.height);
         let (ow, oh) = sheet_size(w, h, opts.max_width);
         let mut rgb = shrink_u8(&background, 3, (w, h), (ow, oh));
-        let sk = scaled_intrinsics(&k, ow, oh);
+        let sk = k.scaled(ow, oh);
         let gt_pose = pose_at(&rec.pose_gt, t);
         let est_pose = pose_at(&rec.pose_estimate, t);
         let mask = mask.map(|s| shrink_silhouette(&s, ow, oh));
@@ -642,6 +628,7 @@ mod tests {
             fy: f,
             cx: (w as f64 - 1.0) / 2.0,
             cy: (h as f64 - 1.0) / 2.0,
+            distortion: Default::default(),
         }
     }
 
@@ -676,7 +663,15 @@ mod tests {
     fn rasterising_at_the_shrunk_size_matches_shrinking_the_full_raster() {
         // 1280x800 -> 480x300; a tilted square off centre.
         let (w, h) = (1280, 800);
-        let full_k = Intrinsics { width: w, height: h, fx: 900.0, fy: 900.0, cx: 650.3, cy: 390.8 };
+        let full_k = Intrinsics {
+            width: w,
+            height: h,
+            fx: 900.0,
+            fy: 900.0,
+            cx: 650.3,
+            cy: 390.8,
+            distortion: Default::default(),
+        };
         let (ow, oh) = sheet_size(w, h, 480);
         assert_eq!((ow, oh), (480, 300));
         let a = 0.4f64;
@@ -684,7 +679,7 @@ mod tests {
         let mesh = square(0.25, 0.0);
         let full = rasterize(&mesh, &pose, &full_k);
         let shrunk = shrink_silhouette(&full, ow, oh);
-        let direct = rasterize(&mesh, &pose, &scaled_intrinsics(&full_k, ow, oh));
+        let direct = rasterize(&mesh, &pose, &full_k.scaled(ow, oh));
         let iou = shrunk.iou(&direct).expect("same size");
         assert!(iou > 0.97, "IoU {iou}");
         assert!(direct.area() > 2000, "{}", direct.area());

@@ -26,7 +26,15 @@ pub fn frame(k: u64, t_ns: u64, with_pose: bool) -> FrameRecord {
     FrameRecord {
         tick: k * 10,
         capture_ns: t_ns,
-        intrinsics: Intrinsics { width: W, height: H, fx: 20.0, fy: 20.0, cx: 8.0, cy: 4.0 },
+        intrinsics: Intrinsics {
+            width: W,
+            height: H,
+            fx: 20.0,
+            fy: 20.0,
+            cx: 8.0,
+            cy: 4.0,
+            distortion: Default::default(),
+        },
         color: Some(Plane {
             width: W,
             height: H,
@@ -46,6 +54,7 @@ pub fn frame(k: u64, t_ns: u64, with_pose: bool) -> FrameRecord {
         tf: Some(tf_at(t_ns, k)),
         // The trigger fired 2 ms + k us before the exposure.
         trigger_ns: Some(t_ns.saturating_sub(2_000_000 + 1000 * k)),
+        light_level: None,
     }
 }
 

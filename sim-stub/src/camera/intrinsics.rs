@@ -1,5 +1,6 @@
-//! Intrinsics presets of the simulated camera (OpenCV pinhole model) and their scaling to other
-//! resolutions.
+//! Intrinsics presets of the simulated camera (OpenCV pinhole model; a lab's `[camera]
+//! distortion` is added by the camera) and their check. Scaling to other resolutions is
+//! [`Intrinsics::scaled`]'s one rule.
 
 use hitl_hal::Intrinsics;
 
@@ -35,29 +36,14 @@ impl Preset {
         }
     }
 
-    /// The preset scaled to `width` x `height` (same field of view).
+    /// The preset scaled to `width` x `height` (same field of view; [`Intrinsics::scaled`]).
     pub fn at(self, width: u32, height: u32) -> Intrinsics {
-        scaled(&self.intrinsics(), width, height)
+        self.intrinsics().scaled(width, height)
     }
 }
 
 fn square(width: u32, height: u32, f: f64, cx: f64, cy: f64) -> Intrinsics {
-    Intrinsics { width, height, fx: f, fy: f, cx, cy }
-}
-
-/// `intr` resampled to `width` x `height`: focal lengths and principal point scale with the
-/// resolution along each axis, so the field of view is kept.
-pub fn scaled(intr: &Intrinsics, width: u32, height: u32) -> Intrinsics {
-    let sx = f64::from(width) / f64::from(intr.width.max(1));
-    let sy = f64::from(height) / f64::from(intr.height.max(1));
-    Intrinsics {
-        width,
-        height,
-        fx: intr.fx * sx,
-        fy: intr.fy * sy,
-        cx: intr.cx * sx,
-        cy: intr.cy * sy,
-    }
+    Intrinsics::pinhole(width, height, f, f, cx, cy)
 }
 
 /// Largest image side the simulated camera renders.
@@ -78,6 +64,9 @@ pub fn check(intr: &Intrinsics) -> Option<String> {
             intr.fx, intr.fy, intr.cx, intr.cy
         ));
     }
+    if !intr.distortion.is_finite() {
+        return Some(format!("distortion coefficients must be finite ({:?})", intr.distortion.d()));
+    }
     None
 }
 
@@ -89,8 +78,9 @@ mod tests {
     fn scaling_keeps_the_field_of_view() {
         let n = Preset::Wfov.at(320, 256);
         assert_eq!((n.width, n.height), (320, 256));
-        assert!((n.fx - 1545.0 / 4.0).abs() < 1e-12 && (n.cx - 160.0).abs() < 1e-12);
-        assert!((n.cy - 128.0).abs() < 1e-12);
+        // (640 + 0.5) / 4 - 0.5: the principal point keeps its place in the image.
+        assert!((n.fx - 1545.0 / 4.0).abs() < 1e-12 && (n.cx - 159.625).abs() < 1e-12);
+        assert!((n.cy - 127.625).abs() < 1e-12);
         let full = Preset::Nfov.intrinsics();
         // The paper's FOV column is the vertical one: 2 atan(512 / f).
         let vfov = (512.0_f64 / full.fy).atan().to_degrees() * 2.0;

@@ -333,6 +333,7 @@ mod tests {
             fy: f,
             cx: (w as f64 - 1.0) / 2.0,
             cy: (h as f64 - 1.0) / 2.0,
+            distortion: Default::default(),
         }
     }
 

@@ -117,6 +117,7 @@ fn test_fire_camera(info: &CameraInfo, port: &str, n: u32) -> Result<(), String>
         fy: 1.0,
         cx: f64::from(width) / 2.0,
         cy: f64::from(height) / 2.0,
+        distortion: Default::default(),
     };
     let tested = (|| {
         cam.configure(&StreamConfig { intrinsics: k, mask: false }).map_err(|e| e.to_string())?;
