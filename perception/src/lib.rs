@@ -24,6 +24,7 @@ pub mod reregister;
 pub mod silhouette;
 pub mod socket;
 pub mod testing;
+pub mod tracker_bench;
 pub mod worker;
 
 pub use error::PerceptionError;
