@@ -2,6 +2,9 @@
 # Issue 14's capture goal, checked: a 10 Hz capture schedule (a capture at every waypoint of a
 # 12 s, 10 m fly-around arc) played on the embedded stub while recording, with the ICP tracker
 # running, at the default camera (the Orbbec preset, 1280x800) and at the paper's WFOV 1280x1024.
+# The "real path" row (issue 23) adds what a real camera's frames go through: the controller draws
+# every capture's mask (--mask rendered, on the intake thread) and the depth is the Orbbec stereo
+# model's (--depth-model orbbec).
 # Goal per row: no capture lost (every scheduled capture recorded, none "camera busy") and the
 # recorded capture sync error's p99 under 5 ms. Prints one Markdown table; exits 1 if a row misses.
 #   usage: scripts/capture_check.sh [SCENE...]      (default: lab orbit)
@@ -21,14 +24,19 @@ echo "| scene | camera | scheduled | recorded | camera busy | sync p99 [ms] | sy
 echo "| --- | --- | --- | --- | --- | --- | --- | --- |"
 fail=0
 for scene in "${SCENES[@]}"; do
-  for cam in "orbbec 1280x800" "wfov 1280x1024"; do
+  for cam in "orbbec 1280x800" "wfov 1280x1024" "orbbec 1280x800 real"; do
     set -- $cam
-    rec="$OUT/$scene-$1.mcap"
+    name="$1${3:+-$3}"
+    extra=()
+    [ "${3:-}" = real ] && extra=(--mask rendered --depth-model orbbec)
+    rec="$OUT/$scene-$name.mcap"
     # shellcheck disable=SC2046
     $HITL run "$plan" --record "$rec" --camera sim --camera-preset "$1" --camera-size "$2" \
-      --light sim --perception icp --plain $(scene_flag "$scene") >"$OUT/$scene-$1.log" 2>&1
-    $HITL report "$rec" --out "$OUT/$scene-$1-report" >/dev/null
-    python3 - "$OUT/$scene-$1-report/summary.json" "$OUT/$scene-$1.log" "$scene" "$1 $2" <<'PY' || fail=1
+      --light sim --perception icp --plain $(scene_flag "$scene") "${extra[@]}" \
+      >"$OUT/$scene-$name.log" 2>&1
+    $HITL report "$rec" --out "$OUT/$scene-$name-report" >/dev/null
+    label="$1 $2${3:+, --mask rendered --depth-model orbbec}"
+    python3 - "$OUT/$scene-$name-report/summary.json" "$OUT/$scene-$name.log" "$scene" "$label" <<'PY' || fail=1
 import json, re, sys
 s = json.load(open(sys.argv[1]))
 log = open(sys.argv[2]).read()

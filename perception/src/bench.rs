@@ -1,4 +1,5 @@
-//! Benchmarks of the built-in tracker on rendered frames (the lead wires them into `hitl bench`).
+//! Benchmarks of the built-in tracker on clean rendered frames (`hitl bench accuracy` runs
+//! [`bench_accuracy`]; `hitl bench tracker` runs [`crate::tracker_bench`]).
 //!
 //! [`bench_tracker`]: frames per second of registration and tracking at a rendering size.
 //! [`bench_accuracy`]: the paper's Table-3 style figures (mean e_t, e_r per range and target) on

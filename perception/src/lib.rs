@@ -25,6 +25,7 @@ pub mod reregister;
 pub mod silhouette;
 pub mod socket;
 pub mod testing;
+pub mod tracker_bench;
 pub mod undistort;
 pub mod worker;
 

@@ -27,7 +27,10 @@ pub enum Which {
     /// Sustained recording of depth + colour at 30 fps plus 250 Hz telemetry, side by side with
     /// numpy savez_compressed per depth frame.
     Record,
-    /// ICP tracker frames/s at --size.
+    /// The ICP tracker on a fly-around of each --target-model: the paper's metrics, failures,
+    /// frames/s, registration time, against issue 23's goal. Frames drawn by the test rasteriser
+    /// at --camera-preset/--size, depth as rendered or through the Orbbec model (--depth-model),
+    /// the exact silhouette or the controller's drawn mask (--mask) (docs/perception.md).
     Tracker,
     /// Pose accuracy (paper's metrics) on synthetic fly-arounds at 5, 10, 25 and 50 m.
     Accuracy,
@@ -55,9 +58,32 @@ pub struct BenchArgs {
     /// Spin for the last N microseconds before each deadline.
     #[arg(long, default_value_t = 0, value_name = "US")]
     pub spin_us: u64,
-    /// Image size for the tracker and accuracy benchmarks.
-    #[arg(long, default_value = "320x256", value_name = "WxH")]
-    pub size: String,
+    /// Image size for the tracker and accuracy benchmarks (default: accuracy 320x256; tracker
+    /// the --camera-preset's own size).
+    #[arg(long, value_name = "WxH")]
+    pub size: Option<String>,
+    /// Tracker: the simulated camera's intrinsics preset, scaled to --size: wfov, nfov or orbbec
+    /// (1280x800, f = 640 px).
+    #[arg(long, default_value = "wfov", value_name = "wfov|nfov|orbbec")]
+    pub camera_preset: String,
+    /// Tracker: depth as rendered (ideal) or through the Orbbec Gemini 305 model (orbbec), as
+    /// `hitl run --depth-model`.
+    #[arg(long, default_value = "ideal", value_name = "ideal|orbbec")]
+    pub depth_model: crate::devices::SimDepthModel,
+    /// Tracker: the mask the tracker gets: sim (the exact silhouette) or rendered (drawn as
+    /// `hitl run --mask rendered` draws it, lab equal to the truth, grown by --mask-margin-px).
+    #[arg(long, default_value = "sim", value_name = "sim|rendered")]
+    pub mask: String,
+    /// Tracker: the rendered mask's margin, pixels.
+    #[arg(long, default_value_t = crate::capture::mask::DEFAULT_MARGIN_PX, value_name = "N")]
+    pub mask_margin_px: u32,
+    /// Tracker: a target (built-in name or OBJ/STL file), repeatable; default every built-in.
+    #[arg(long, value_name = "NAME|FILE")]
+    pub target_model: Vec<String>,
+    /// Tracker: the fly-around's nearest range, real metres (the lab scale is the paper's
+    /// workspace scale at this range).
+    #[arg(long, default_value_t = 10.0, value_name = "M")]
+    pub range_m: f64,
     /// Frames per model for the tracker and accuracy benchmarks.
     #[arg(long, default_value_t = 30, value_name = "N")]
     pub frames: usize,
@@ -88,6 +114,54 @@ fn venv_python() -> Option<String> {
     std::path::Path::new(p).exists().then(|| p.to_string())
 }
 
+fn parse_size(s: &str) -> Option<(u32, u32)> {
+    let (w, h) = s.split_once('x')?;
+    let (w, h) = (w.parse::<u32>().ok()?, h.parse::<u32>().ok()?);
+    (w > 0 && h > 0 && w <= 8192 && h <= 8192).then_some((w, h))
+}
+
+/// The tracker bench's options from the flags.
+#[cfg(feature = "stub")]
+fn tracker_options(
+    args: &BenchArgs,
+    size: Option<(u32, u32)>,
+) -> Result<hitl_perception::tracker_bench::TrackerBenchOptions, String> {
+    use hitl_sim_stub::camera::Preset;
+    let preset = Preset::from_name(&args.camera_preset).ok_or_else(|| {
+        format!("--camera-preset {:?}: expected wfov, nfov or orbbec", args.camera_preset)
+    })?;
+    let native = preset.intrinsics();
+    let (w, h) = size.unwrap_or((native.width, native.height));
+    let rendered_mask = match args.mask.as_str() {
+        "sim" => None,
+        "rendered" => Some(args.mask_margin_px),
+        other => return Err(format!("--mask {other:?}: expected sim or rendered")),
+    };
+    if !(args.range_m.is_finite() && args.range_m > 0.0) {
+        return Err(format!("--range-m must be a positive number, got {}", args.range_m));
+    }
+    let targets = if args.target_model.is_empty() {
+        hitl_perception::models::SPACECRAFT_NAMES
+            .iter()
+            .chain(hitl_perception::models::BUILTIN_NAMES.iter())
+            .map(|s| s.to_string())
+            .collect()
+    } else {
+        args.target_model.clone()
+    };
+    for t in &targets {
+        hitl_perception::TargetModel::from_spec(t).map_err(|e| format!("--target-model: {e}"))?;
+    }
+    Ok(hitl_perception::tracker_bench::TrackerBenchOptions {
+        intrinsics: preset.at(w, h),
+        depth_model: args.depth_model.to_string(),
+        rendered_mask,
+        targets,
+        range_m: args.range_m,
+        frames: args.frames,
+    })
+}
+
 pub fn run(args: BenchArgs) -> u8 {
     if !(args.seconds > 0.0 && args.seconds.is_finite()) {
         crate::errln!("hitl bench: --seconds must be positive");
@@ -97,14 +171,15 @@ pub fn run(args: BenchArgs) -> u8 {
         crate::errln!("hitl bench: --rate must be within 50-1000 Hz");
         return exit::BAD_INPUT;
     }
-    let Some((width, height)) = args
-        .size
-        .split_once('x')
-        .and_then(|(w, h)| Some((w.parse::<u32>().ok()?, h.parse::<u32>().ok()?)))
-    else {
-        crate::errln!("hitl bench: --size must be WIDTHxHEIGHT, e.g. 320x256");
-        return exit::BAD_INPUT;
+    let size = match args.size.as_deref().map(parse_size) {
+        Some(Some(s)) => Some(s),
+        Some(None) => {
+            crate::errln!("hitl bench: --size must be WIDTHxHEIGHT, e.g. 320x256");
+            return exit::BAD_INPUT;
+        }
+        None => None,
     };
+    let (width, height) = size.unwrap_or((320, 256));
     let python = venv_python().unwrap_or_else(|| "python3".into());
     let figures = match args.which {
         Which::Npz => {
@@ -135,7 +210,7 @@ pub fn run(args: BenchArgs) -> u8 {
             )
         }
         #[cfg(not(feature = "stub"))]
-        Which::Protocol | Which::Render => {
+        Which::Protocol | Which::Render | Which::Tracker => {
             crate::errln!("hitl bench: this build has no stub");
             return exit::BAD_INPUT;
         }
@@ -146,7 +221,31 @@ pub fn run(args: BenchArgs) -> u8 {
                 python_figures(&python, "bench_record_numpy.py", &["--seconds".into(), secs]);
             serde_json::json!({ "bench": "record", "hitl": rust, "numpy_savez_compressed": numpy })
         }
-        Which::Tracker => hitl_perception::bench::bench_tracker(width, height, args.frames),
+        #[cfg(feature = "stub")]
+        Which::Tracker => match tracker_options(&args, size) {
+            Ok(o) => {
+                let noise = hitl_sim_stub::camera::NoiseModel {
+                    depth_model: hitl_sim_stub::camera::DepthModel::Orbbec(
+                        hitl_sim_stub::camera::StereoDepth::GEMINI_305,
+                    ),
+                    seed: 23,
+                    ..Default::default()
+                };
+                let orbbec = move |i: u64, d: &mut [f32], k: &hitl_hal::Intrinsics| {
+                    noise.draw(i).apply_depth(d, k)
+                };
+                let degrade: Option<hitl_perception::tracker_bench::DepthModel<'_>> =
+                    match args.depth_model {
+                        crate::devices::SimDepthModel::Orbbec => Some(&orbbec),
+                        crate::devices::SimDepthModel::Ideal => None,
+                    };
+                hitl_perception::tracker_bench::run(&o, degrade)
+            }
+            Err(e) => {
+                crate::errln!("hitl bench tracker: {e}");
+                return exit::BAD_INPUT;
+            }
+        },
         Which::Accuracy => hitl_perception::bench::bench_accuracy(
             &[5.0, 10.0, 25.0, 50.0],
             width,

@@ -16,8 +16,22 @@ pub struct Fit {
     pub rms: f64,
 }
 
+/// A prior on the rotation (the track's prediction), as a Tikhonov term of the Gauss-Newton
+/// steps: `weight` x |rotation vector from the estimate to `rotation`|^2 joins the squared
+/// point-to-plane residuals. `weight` = (the points' noise / the prediction's turn error)^2,
+/// metres^2 per rad^2: where the scene pins the rotation (most views) it changes nothing
+/// measurable; where it does not (a flat panel seen face on pins no turn about its normal; a
+/// small far view of noisy depth), the rotation follows the target's motion instead of the
+/// noise.
+#[derive(Debug, Clone, Copy)]
+pub struct RotationPrior {
+    pub rotation: UnitQuaternion<f64>,
+    pub weight: f64,
+}
+
 /// Refines `init` with up to `iters` point-to-plane steps. `max_dist` bounds correspondences at
 /// the start; later the bound follows 3x the median distance (not below `tol`).
+#[allow(clippy::too_many_arguments)]
 pub fn align(
     model: &ModelCloud,
     scene: &[Vector3<f64>],
@@ -26,6 +40,7 @@ pub fn align(
     max_dist: f64,
     tol: f64,
     facing: bool,
+    prior: Option<&RotationPrior>,
 ) -> Fit {
     let mut t = *init;
     let c = centroid(scene);
@@ -92,6 +107,14 @@ pub fn align(
         let damping = 1e-9 * a.trace().max(1e-30);
         for k in 0..6 {
             a[(k, k)] += damping;
+        }
+        if let Some(p) = prior.filter(|p| p.weight > 0.0 && p.weight.is_finite()) {
+            // The step's rotation part is pulled toward the turn that reaches the prior.
+            let to_prior = (p.rotation * t.rotation.inverse()).scaled_axis();
+            for k in 0..3 {
+                a[(k, k)] += p.weight;
+                b[k] -= p.weight * to_prior[k];
+            }
         }
         let Some(x) = a.cholesky().map(|ch| ch.solve(&(-b))) else {
             break;

@@ -35,7 +35,7 @@ use crate::estimator::{Estimate, EstimateKind, PoseEstimator, ScalableEstimator}
 use crate::models::Mesh;
 use crate::pose::from_rt;
 use crate::{PerceptionError, PerceptionFrame};
-use align::{align, Fit};
+use align::{align, Fit, RotationPrior};
 use hitl_hal::pose::{self, Pose};
 use model::ModelCloud;
 use nalgebra::{Matrix3, Translation3, Vector3};
@@ -77,6 +77,16 @@ pub struct IcpConfig {
     /// target's range can exceed the model-size tolerance, and then a correct pose is not an
     /// outlier of its own data.
     pub noise_sigmas: f64,
+    /// How scene depths are averaged over their neighbourhood and edge pixels left out
+    /// ([`cloud::Smoothing`]). Off: on the Orbbec model's depth (independent per-pixel error) a
+    /// 3x3 or 5x5 window gated at 3 sigma did not lower the fly-arounds' rotation error
+    /// (docs/perception.md has the figures).
+    pub smoothing: cloud::Smoothing,
+    /// How far the target's turn may stray from the track's constant-motion prediction in one
+    /// capture, degrees (the rotation prior of tracking, [`align::RotationPrior`]); 0: none.
+    /// 1 deg, by measurement on the Orbbec model's 10 m fly-arounds: 0.3 and 0.1 deg made the
+    /// prediction (its motion taken from the last two noisy estimates) lead the track astray.
+    pub prior_turn_deg: f64,
 }
 
 impl Default for IcpConfig {
@@ -99,6 +109,8 @@ impl Default for IcpConfig {
             max_violation: 0.05,
             min_scene_points: 30,
             noise_sigmas: 2.5,
+            smoothing: cloud::Smoothing::OFF,
+            prior_turn_deg: 1.0,
         }
     }
 }
@@ -143,8 +155,10 @@ pub struct IcpTracker {
     last_good: Option<Pose>,
     velocity: Option<Pose>,
     missed: u32,
-    /// This frame's depth-noise tolerance (`noise_sigmas` x its estimated noise), metres.
+    /// This frame's depth-noise tolerances (`noise_sigmas` x its estimated noise), metres: of
+    /// the scene points (averaged depths) and of single pixels (the image checks).
     noise_tol: f64,
+    pixel_noise_tol: f64,
     /// This frame's depth beyond which mask pixels are background ([`cloud::Scene::far_m`]).
     far_m: f64,
 }
@@ -186,6 +200,7 @@ impl IcpTracker {
             velocity: None,
             missed: 0,
             noise_tol: 0.0,
+            pixel_noise_tol: 0.0,
             far_m: f64::INFINITY,
         })
     }
@@ -200,12 +215,18 @@ impl IcpTracker {
         geometric.max(self.noise_tol)
     }
 
+    /// The tolerance of the image checks, which compare with single pixels' depths.
+    fn pixel_tol(&self) -> f64 {
+        self.tol().max(self.pixel_noise_tol)
+    }
+
     fn full_check(
         &self,
         frame: &PerceptionFrame,
         scene: &[Vector3<f64>],
         init: &Pose,
         behind_others: Hidden,
+        prior: Option<&RotationPrior>,
     ) -> Scored {
         let d = self.model.diameter;
         let fit = align(
@@ -216,9 +237,16 @@ impl IcpTracker {
             self.cfg.track_max_dist_rel * d,
             self.tol(),
             true,
+            prior,
         );
-        let img =
-            score::check(&self.model, frame, &fit.pose, self.tol(), behind_others, self.far_m);
+        let img = score::check(
+            &self.model,
+            frame,
+            &fit.pose,
+            self.pixel_tol(),
+            behind_others,
+            self.far_m,
+        );
         Scored { fit, silhouette: img.silhouette, violation: img.violation }
     }
 
@@ -248,14 +276,14 @@ impl IcpTracker {
         let dense = cloud::thin(scene, self.cfg.coarse_points * 2);
         let c = cloud::centroid(&sparse);
         let d = self.model.diameter;
-        let tol = self.tol();
+        let (tol, pixel_tol) = (self.tol(), self.pixel_tol());
         let rank = |cloud: &[Vector3<f64>], init: &Pose, iters: usize, max_dist: f64| {
-            let fit = align(&self.model, cloud, init, iters, max_dist, 2.0 * tol, false);
+            let fit = align(&self.model, cloud, init, iters, max_dist, 2.0 * tol, false, None);
             let img = score::check_strided(
                 &self.model,
                 frame,
                 &fit.pose,
-                2.0 * tol,
+                2.0 * pixel_tol,
                 16,
                 Hidden::Miss,
                 self.far_m,
@@ -282,12 +310,14 @@ impl IcpTracker {
             let s: Vec<String> = cands.iter().map(|c| format!("{:.3}", c.0)).collect();
             debug_line!("icp registration candidates: {} ({:?})", s.join(" "), t0.elapsed());
         }
-        let mut checked: Vec<Scored> =
-            cands.iter().map(|(_, p)| self.full_check(frame, scene, p, Hidden::Miss)).collect();
+        let mut checked: Vec<Scored> = cands
+            .iter()
+            .map(|(_, p)| self.full_check(frame, scene, p, Hidden::Miss, None))
+            .collect();
         // The priors take the second stage's wider capture radius first, like the grid's best.
         for p in priors {
             let (_, near) = rank(&dense, p, self.cfg.coarse_iters, 0.15 * d);
-            checked.push(self.full_check(frame, scene, &near, Hidden::Miss));
+            checked.push(self.full_check(frame, scene, &near, Hidden::Miss, None));
         }
         let best = checked.iter().max_by(|a, b| a.score().total_cmp(&b.score())).copied();
         let Some(p) = priors.first() else {
@@ -362,8 +392,11 @@ impl PoseEstimator for IcpTracker {
 
     fn estimate(&mut self, frame: &PerceptionFrame) -> Result<Estimate, PerceptionError> {
         frame.validate()?;
-        let seen = cloud::scene(frame, self.cfg.scene_points, self.model.diameter);
-        self.noise_tol = self.cfg.noise_sigmas * seen.noise_m;
+        let seen =
+            cloud::scene(frame, self.cfg.scene_points, self.model.diameter, &self.cfg.smoothing);
+        self.noise_tol = self.cfg.noise_sigmas * seen.point_noise_m;
+        self.pixel_noise_tol = self.cfg.noise_sigmas * seen.noise_m;
+        let seen_point_noise = seen.point_noise_m;
         self.far_m = seen.far_m;
         let scene = seen.points;
         if scene.len() < self.cfg.min_scene_points {
@@ -380,8 +413,14 @@ impl PoseEstimator for IcpTracker {
             }
             _ => Vec::new(),
         };
+        // The rotation prior: the prediction's turn, weighed by the points' noise against how far
+        // the target's turn strays from constant motion in one capture.
+        let prior = prediction.filter(|_| self.cfg.prior_turn_deg > 0.0).map(|p| RotationPrior {
+            rotation: p.rotation,
+            weight: (seen_point_noise / self.cfg.prior_turn_deg.to_radians()).powi(2),
+        });
         for start in &starts {
-            let s = self.full_check(frame, &scene, start, Hidden::Skipped);
+            let s = self.full_check(frame, &scene, start, Hidden::Skipped, prior.as_ref());
             // ICP is local: a fit that turned further than the target can between captures slid
             // into a look-alike pose.
             let turn = rotation_distance(&s.fit.pose, start);
@@ -443,6 +482,7 @@ impl ScalableEstimator for IcpTracker {
             *f *= factor;
         }
         self.noise_tol *= factor;
+        self.pixel_noise_tol *= factor;
         self.far_m *= factor;
         let poses = [&mut self.prev, &mut self.last_good, &mut self.velocity];
         for p in poses.into_iter().flatten() {
