@@ -119,9 +119,31 @@ fn a_tripped_run_leaves_the_named_camera_as_found_and_the_other_untouched() {
     fake.set_sync("CP2", "1 0 0 0 0 0 1"); // trigger out off: written back as found
     let dir = tempfile::tempdir().expect("tempdir");
     let traj = trajectory(dir.path());
-    let args = run_args(&traj, "orbbec:software@CP2", &["--stub-fault", "estop@1.5"]);
+    let mcap = dir.path().join("run.mcap");
+    let m = mcap.to_str().expect("utf-8");
+    let args =
+        run_args(&traj, "orbbec:software@CP2", &["--stub-fault", "estop@1.5", "--record", m]);
     let out = fake.hitl().args(&args).stdin(Stdio::null()).output().expect("run");
     assert_eq!(out.status.code(), Some(4), "{}", text(&out));
+    // The captures before the trip carry the colour lens the SDK double reports (Brown-Conrady
+    // k1 0.125, k2 -0.25, p1 0.001, p2 -0.002).
+    let want = [0.125, -0.25, f64::from(0.001f32), f64::from(-0.002f32), 0.0];
+    let mut lenses = 0;
+    hitl_record::reader::visit(
+        &mcap,
+        |msg| {
+            if msg.topic == "/camera/calibration" {
+                let (_, k) = hitl_record::reader::decode_intrinsics(msg.data, msg.log_time)
+                    .expect("intrinsics");
+                assert_eq!(k.distortion.d(), &want[..]);
+                lenses += 1;
+            }
+            std::ops::ControlFlow::Continue(())
+        },
+        |_, _| {},
+    )
+    .expect("the recording reads");
+    assert!(lenses >= 1, "no capture recorded before the trip:\n{}", text(&out));
     assert_eq!(fake.sync("CP2"), "1 0 0 0 0 0 1", "log:\n{}", fake.log());
     assert!(fake.log().contains("sync CP2 32 out 0"), "it was triggered:\n{}", fake.log());
     assert!(!fake.log().contains("sync CP1"), "the other camera untouched:\n{}", fake.log());

@@ -70,7 +70,7 @@ pub fn start_stub(
         camera_lens: lab
             .camera
             .distortion
-            .map_or(hitl_hal::Distortion::NONE, |d| hitl_hal::Distortion::brown_conrady(d)),
+            .map_or(hitl_hal::Distortion::NONE, hitl_hal::Distortion::brown_conrady),
     })
 }
 

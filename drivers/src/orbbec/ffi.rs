@@ -986,7 +986,9 @@ pub struct AlignFilter {
 }
 
 impl AlignFilter {
-    pub fn depth_to_color(sdk: &Arc<Sdk>) -> Result<AlignFilter, SdkError> {
+    /// `into_distorted`: register into the colour image as its lens distorts it (a colour
+    /// stream with a distortion); false for a pinhole colour stream, where it changes nothing.
+    pub fn depth_to_color(sdk: &Arc<Sdk>, into_distorted: bool) -> Result<AlignFilter, SdkError> {
         let api = &sdk.api;
         let name = c"Align";
         // SAFETY: `name` is a valid C string for the call; the filter is owned by `AlignFilter`.
@@ -1006,11 +1008,13 @@ impl AlignFilter {
         // Register depth into the *distorted* colour image (the SDK's default projects it into
         // undistorted colour coordinates while the colour image stays distorted): depth and
         // colour then agree pixel for pixel, and both carry the colour lens's distortion.
-        let key = c"TargetDistortion";
-        // SAFETY: live filter; `key` is a valid C string; 1 is in the boolean's range.
-        sdk.call("ob_filter_set_config_value", |e| unsafe {
-            (api.ob_filter_set_config_value)(filter.ptr, key.as_ptr(), 1.0, e)
-        })?;
+        if into_distorted {
+            let key = c"TargetDistortion";
+            // SAFETY: live filter; `key` is a valid C string; 1 is in the boolean's range.
+            sdk.call("ob_filter_set_config_value", |e| unsafe {
+                (api.ob_filter_set_config_value)(filter.ptr, key.as_ptr(), 1.0, e)
+            })?;
+        }
         Ok(filter)
     }
 

@@ -287,9 +287,10 @@ mod tests {
         let k = [0.125, -0.25, 0.01, 0.5, 0.25, 0.125];
         let d = check_distortion(k, 0.001, -0.002, OB_DISTORTION_BROWN_CONRADY).expect("BC");
         assert_eq!(d.model, DistortionModel::BrownConrady);
-        assert_eq!(d.d(), &[0.125, -0.25, f64::from(0.001f32), f64::from(-0.002f32), 0.01]);
+        let (p1, p2, k3) = (f64::from(0.001f32), f64::from(-0.002f32), f64::from(0.01f32));
+        assert_eq!(d.d(), &[0.125, -0.25, p1, p2, k3]);
         let d = check_distortion(k, 0.0, 0.0, OB_DISTORTION_BROWN_CONRADY_K6).expect("K6");
-        assert_eq!(d.d(), &[0.125, -0.25, 0.0, 0.0, 0.01, 0.5, 0.25, 0.125]);
+        assert_eq!(d.d(), &[0.125, -0.25, 0.0, 0.0, k3, 0.5, 0.25, 0.125]);
         assert!(check_distortion(k, 0.0, 0.0, OB_DISTORTION_NONE).expect("none").is_none());
         let e = check_distortion(k, 0.0, 0.0, 5).expect_err("Kannala-Brandt");
         assert!(e.message().contains("model 5"), "{e}");

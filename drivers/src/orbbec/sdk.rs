@@ -315,7 +315,10 @@ impl CameraSdk for SdkCamera {
     fn start(&mut self, color: VideoProfile, depth: VideoProfile) -> Result<(), OrbbecError> {
         let c = self.find(OB_SENSOR_COLOR, color)?;
         let d = self.find(OB_SENSOR_DEPTH, depth)?;
-        let align = AlignFilter::depth_to_color(&self.sdk)
+        // Into the distorted colour image where the colour lens has a distortion.
+        let lens = c.distortion().map_err(|e| OrbbecError::sdk("reading colour distortion", &e))?;
+        let distorted = !check_distortion(lens.k, lens.p1, lens.p2, lens.model)?.is_none();
+        let align = AlignFilter::depth_to_color(&self.sdk, distorted)
             .map_err(|e| OrbbecError::sdk("creating the Align filter", &e))?;
         self.pipeline
             .start(&c, &d)

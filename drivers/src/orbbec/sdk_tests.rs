@@ -73,7 +73,7 @@ fn align_depth(
     let df =
         Frame::new_video(&dp, OB_FRAME_DEPTH, dd, depth, 1_000, 2_000, Some(0.1)).expect("depth");
     let set = Frame::new_frameset(&sdk, &[&cf, &df]).expect("frameset");
-    let mut filter = AlignFilter::depth_to_color(&sdk).expect("Align filter");
+    let mut filter = AlignFilter::depth_to_color(&sdk, false).expect("Align filter");
     let raw = align_and_copy(&mut filter, &set).expect("aligned");
     let k = check_intrinsics(50.0, 50.0, 32.0, 24.0, CW, CH).expect("intrinsics");
     check_frameset(&raw, &k, true).expect("the aligned frameset passes the driver's checks")
