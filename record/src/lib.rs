@@ -28,7 +28,7 @@ pub use health::RecorderHealth;
 pub use live::{LiveConfig, LiveError, LiveServer, LiveSummary, LiveTap};
 pub use metadata::{RunMetadata, SunPhaseTrack};
 pub use msg::{
-    ArmStateMsg, CaptureSyncMsg, DepthImage, EventDetail, EventKind, FrameRecord, LightMsg, Phase,
+    ArmStateMsg, CaptureSyncMsg, ClosedLoopMsg, ClosedLoopTopic, DepthImage, EventDetail, EventKind, FrameRecord, LightMsg, Phase,
     Plane, PoseStamped, SafetyEventMsg, SetpointMsg, TfMsg, TimingMsg, TriggerFiredMsg,
 };
 pub use queues::{QueueCapacity, Telemetry};

@@ -40,9 +40,12 @@ pub(crate) enum Ch {
     CaptureSync,
     TriggerFired,
     Stats,
+    ClosedLoopFilter,
+    ClosedLoopCorrection,
+    ClosedLoopGate,
 }
 
-pub(crate) const CHANNELS: [Ch; 15] = [
+pub(crate) const CHANNELS: [Ch; 18] = [
     Ch::Setpoint,
     Ch::State,
     Ch::Timing,
@@ -58,6 +61,9 @@ pub(crate) const CHANNELS: [Ch; 15] = [
     Ch::CaptureSync,
     Ch::TriggerFired,
     Ch::Stats,
+    Ch::ClosedLoopFilter,
+    Ch::ClosedLoopCorrection,
+    Ch::ClosedLoopGate,
 ];
 
 impl Ch {
@@ -78,6 +84,9 @@ impl Ch {
             Ch::CaptureSync => topics::CAPTURE_SYNC,
             Ch::TriggerFired => topics::TRIGGER_FIRED,
             Ch::Stats => topics::RECORDER_STATS,
+            Ch::ClosedLoopFilter => topics::CLOSED_LOOP_FILTER,
+            Ch::ClosedLoopCorrection => topics::CLOSED_LOOP_CORRECTION,
+            Ch::ClosedLoopGate => topics::CLOSED_LOOP_GATE,
         }
     }
 
@@ -292,6 +301,16 @@ impl McapSink {
     }
     pub fn stats(&mut self, t_ns: u64, v: &serde_json::Value) -> Result<(), RecordError> {
         self.json(Ch::Stats, t_ns, v)
+    }
+
+    /// One of the closed loop's `/closed_loop/*` messages.
+    pub fn closed_loop(&mut self, m: &crate::msg::ClosedLoopMsg) -> Result<(), RecordError> {
+        let ch = match m.topic {
+            crate::msg::ClosedLoopTopic::Filter => Ch::ClosedLoopFilter,
+            crate::msg::ClosedLoopTopic::Correction => Ch::ClosedLoopCorrection,
+            crate::msg::ClosedLoopTopic::Gate => Ch::ClosedLoopGate,
+        };
+        self.json(ch, m.t_ns, &m.value)
     }
 
     pub fn tf(&mut self, m: &TfMsg) -> Result<(), RecordError> {
