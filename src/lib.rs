@@ -10,8 +10,8 @@
 
 pub mod bench;
 pub mod capture;
-pub mod closed_loop;
 pub mod cli;
+pub mod closed_loop;
 pub mod console;
 pub mod control;
 pub mod devices;

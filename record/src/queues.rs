@@ -5,8 +5,8 @@
 //! is counted and reported as a `capture-not-recorded` safety event, never dropped silently.
 
 use crate::msg::{
-    ArmStateMsg, ClosedLoopMsg, ClosedLoopTopic, EventKind, FrameRecord, LightMsg, PoseStamped, SafetyEventMsg, SetpointMsg, TfMsg,
-    TimingMsg, TriggerFiredMsg,
+    ArmStateMsg, ClosedLoopMsg, ClosedLoopTopic, EventKind, FrameRecord, LightMsg, PoseStamped,
+    SafetyEventMsg, SetpointMsg, TfMsg, TimingMsg, TriggerFiredMsg,
 };
 use crossbeam_queue::ArrayQueue;
 use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};

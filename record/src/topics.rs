@@ -86,7 +86,7 @@ pub(crate) fn json_schema(topic: &str) -> Option<(&'static str, String)> {
         ),
         CLOSED_LOOP_CORRECTION => (
             "hitl.ClosedLoopCorrection",
-            r#"{"type":"object","properties":{"tick":{"type":"integer"},"id":{"type":"integer"},"based_on":{"type":"integer"},"correction_lab_m":{"type":"array","items":{"type":"number"}},"clamped":{"type":"boolean"},"offset_rad":{"type":"array","items":{"type":"number"}},"return_to_plan":{"type":"boolean"},"refused":{"type":"string"}},"required":["tick"]}"#.to_string(),
+            r#"{"type":"object","properties":{"tick":{"type":"integer"},"id":{"type":"integer"},"based_on":{"type":"integer"},"correction_lab_m":{"type":"array","items":{"type":"number"}},"clamped":{"type":"boolean"},"ticks":{"type":"integer"},"return_to_plan":{"type":"boolean"},"refused":{"type":"string"}},"required":["tick"]}"#.to_string(),
         ),
         CLOSED_LOOP_GATE => (
             "hitl.ClosedLoopGate",

@@ -179,7 +179,14 @@ mod tests {
         let r = 5.0;
         let at = |t: f64| {
             let u = N * t;
-            Vector6::new(-r * u.cos(), 2.0 * r * u.sin(), 0.0, r * N * u.sin(), 2.0 * r * N * u.cos(), 0.0)
+            Vector6::new(
+                -r * u.cos(),
+                2.0 * r * u.sin(),
+                0.0,
+                r * N * u.sin(),
+                2.0 * r * N * u.cos(),
+                0.0,
+            )
         };
         let got = phi * at(0.0);
         assert!((got - at(5000.0)).norm() < 1e-9, "{got} vs {}", at(5000.0));
@@ -219,5 +226,24 @@ mod tests {
         assert!((f.position() - before).norm() < 0.01, "state kept");
         // The next consistent one is used.
         assert!(matches!(f.update(11.0 * 250.0, &z, sigma), Gate::Accepted { .. }));
+    }
+
+    #[test]
+    fn holds_a_constant_deviation_at_a_fast_time_scale() {
+        // The fly-around of tests/closed_loop.rs: one revolution in 20 s played at half speed,
+        // a capture every second of playback (n * dt = 0.157 rad between captures).
+        let (scale, time_scale) = (7.7e-3, 1078.0);
+        let mut f = RelNavFilter::new(N, FilterNoise::lab_defaults(scale, time_scale));
+        let z = Vector3::new(0.0, 0.0, 0.005 / scale);
+        let sigma = f.default_sigma_m();
+        let mut worst_late = 0.0f64;
+        for i in 0..40 {
+            f.update(i as f64 * time_scale, &z, sigma);
+            if i >= 10 {
+                worst_late = worst_late.max((f.position() - z).norm() * scale);
+            }
+        }
+        eprintln!("worst after 10 captures: {:.4} mm (lab)", worst_late * 1e3);
+        assert!(worst_late < 0.2e-3, "{:.4} mm", worst_late * 1e3);
     }
 }

@@ -1,6 +1,6 @@
 //! Guidance: the filtered deviation from the plan becomes a correction of the camera's position
-//! (lab metres, inside the corridor), and that correction a joint offset of the upcoming
-//! setpoints through the xArm7's camera Jacobian (trajectories' kinematics).
+//! (lab metres, inside the corridor), and that correction, tick by tick, a joint offset of the
+//! upcoming setpoints through the xArm7's camera Jacobian (trajectories' kinematics).
 //!
 //! The law is the simplest that cancels a steady deviation: the wanted correction is minus the
 //! filtered position deviation, mapped to the lab (`-scale * R * dr`), clamped to the corridor.
@@ -26,14 +26,20 @@ pub fn wanted_correction(
 }
 
 /// The joint offset that moves the camera at `q_plan` by `correction` (base frame, lab metres)
-/// with its orientation kept: damped least squares on the camera Jacobian, refined by a few
-/// Newton steps against forward kinematics. `None` when it does not converge to 1 um.
-pub fn joint_offset(q_plan: &Joints, correction: &Vector3<f64>, mount: &Pose) -> Option<Joints> {
+/// with its orientation kept: Newton steps on the camera Jacobian (damped least squares) against
+/// forward kinematics, from `guess` (a neighbouring tick's offset; zeros will do). `None` when
+/// it does not converge to 1 um.
+pub fn joint_offset(
+    q_plan: &Joints,
+    correction: &Vector3<f64>,
+    mount: &Pose,
+    guess: &Joints,
+) -> Option<Joints> {
     let start = camera_pose(q_plan, mount);
     let mut goal = start;
     goal.translation.vector += correction;
-    let mut q = *q_plan;
-    for _ in 0..6 {
+    let mut q: Joints = std::array::from_fn(|i| q_plan[i] + guess[i]);
+    for _ in 0..8 {
         let (cam, j) = camera_jacobian(&q, mount);
         let e = pose_error(&goal, &cam);
         if e.fixed_rows::<3>(0).norm() < 1e-7 && e.fixed_rows::<3>(3).norm() < 1e-7 {
@@ -62,7 +68,7 @@ mod tests {
         let mount = lab.camera_mount();
         let q = lab.arm.rest_q;
         let c = Vector3::new(0.002, -0.001, 0.0015);
-        let dq = joint_offset(&q, &c, &mount).expect("converges");
+        let dq = joint_offset(&q, &c, &mount, &[0.0; DOF]).expect("converges");
         let moved: Joints = std::array::from_fn(|i| q[i] + dq[i]);
         let (a, b) = (camera_pose(&q, &mount), camera_pose(&moved, &mount));
         assert!((b.translation.vector - a.translation.vector - c).norm() < 1e-6);

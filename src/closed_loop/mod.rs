@@ -50,8 +50,7 @@ impl PlanFrame {
             )
         };
         let text = traj.meta.as_deref().ok_or_else(|| why("is missing"))?;
-        let meta: serde_json::Value =
-            serde_json::from_str(text).map_err(|_| why("is not JSON"))?;
+        let meta: serde_json::Value = serde_json::from_str(text).map_err(|_| why("is not JSON"))?;
         let num = |key: &str| {
             meta.get(key)
                 .and_then(|v| v.as_f64())
@@ -112,7 +111,7 @@ impl Default for ClosedLoopConfig {
         Self {
             corridor_m: corridor::DEFAULT_CORRIDOR_M,
             max_age_s: 1.0,
-            fallback_after: 3,
+            fallback_after: 5,
             hold_s: 1.5,
             drill_perception_stop_s: None,
         }

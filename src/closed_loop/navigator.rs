@@ -7,8 +7,8 @@
 //! everything between them goes through lock-free queues (`crate::control::correction`).
 
 use super::filter::{Gate, RelNavFilter};
-use super::guidance::{joint_offset, wanted_correction};
-use super::segment::{PlanTicks, SegmentRules};
+use super::guidance::wanted_correction;
+use super::segment::{CartState, PlanTicks, Planned, SegmentRules};
 use super::{corridor::Corridor, filter::FilterNoise, ClosedLoopConfig, PlanFrame};
 use crate::control::correction::{CorrectionQueues, CorrectionSegment};
 use crate::telemetry::LoopStatus;
@@ -139,19 +139,27 @@ impl Unusable {
     }
 }
 
-/// A segment the navigator sent: its id, first tick and offsets (a copy, to know the offset of
-/// any past tick).
+/// A segment the navigator sent: its id, first tick, corrections and offsets (a copy, to know
+/// the offset of any past tick and the state a new segment starts from).
 struct Sent {
     id: u64,
     from_tick: u64,
-    samples: Vec<JointState>,
+    planned: Planned,
 }
 
 impl Sent {
-    fn at(&self, k: u64) -> JointState {
+    fn index(&self, k: u64) -> Option<usize> {
         k.checked_sub(self.from_tick)
-            .and_then(|i| self.samples.get(i as usize).copied())
-            .unwrap_or_default()
+            .map(|i| i as usize)
+            .filter(|i| *i < self.planned.offsets.len())
+    }
+
+    fn at(&self, k: u64) -> JointState {
+        self.index(k).map(|i| self.planned.offsets[i]).unwrap_or_default()
+    }
+
+    fn cart_at(&self, k: u64) -> CartState {
+        self.index(k).map(|i| self.planned.cart[i]).unwrap_or_default()
     }
 }
 
@@ -204,7 +212,6 @@ impl State {
             lab: &i.lab,
             mount: self.mount,
             corridor: self.corridor,
-            limits: SegmentRules::correction_limits(&i.lab),
             dt: i.dt,
             hold_ticks: (i.config.hold_s / i.dt).round() as u64,
             // The settle waits up to 2 s; the return is done within the first.
@@ -306,7 +313,8 @@ impl State {
         let seen = cam * Point3::from(pose.translation.vector);
         let z_lab = -(seen.coords - self.inp.frame.target_base_m);
         let z = self.inp.frame.lab_to_rtn(&z_lab);
-        let t_orbit = (k - self.inp.plan.first_tick) as f64 * self.inp.dt * self.inp.frame.time_scale;
+        let t_orbit =
+            (k - self.inp.plan.first_tick) as f64 * self.inp.dt * self.inp.frame.time_scale;
         let sigma = self.filter.default_sigma_m();
         let gate = self.filter.update(t_orbit, &z, sigma);
         let x = self.filter.state();
@@ -320,9 +328,11 @@ impl State {
             }),
         );
         match gate {
-            Gate::Rejected { mahalanobis2 } => {
-                self.unusable(k, Unusable::Gated, json!({ "mahalanobis2": finite(mahalanobis2), "measured_lab_m": z_lab.as_slice() }))
-            }
+            Gate::Rejected { mahalanobis2 } => self.unusable(
+                k,
+                Unusable::Gated,
+                json!({ "mahalanobis2": finite(mahalanobis2), "measured_lab_m": z_lab.as_slice() }),
+            ),
             Gate::Accepted { mahalanobis2 } => {
                 self.in_a_row = 0;
                 self.summary.accepted += 1;
@@ -345,7 +355,8 @@ impl State {
             Unusable::Missing => self.summary.missing += 1,
         }
         self.in_a_row += 1;
-        let mut v = json!({ "tick": k, "used": false, "reason": why.name(), "in_a_row": self.in_a_row });
+        let mut v =
+            json!({ "tick": k, "used": false, "reason": why.name(), "in_a_row": self.in_a_row });
         if let (Some(o), Some(e)) = (v.as_object_mut(), extra.as_object()) {
             o.extend(e.clone());
         }
@@ -376,9 +387,10 @@ impl State {
         }
     }
 
-    /// Where a new segment starts, the segment in effect there and its offset; `None` while a
-    /// segment sent earlier has not taken effect yet (a new one would be built on a guess).
-    fn next_start(&self) -> Option<(u64, u64, JointState)> {
+    /// Where a new segment starts, the segment in effect there and its correction and offset
+    /// there; `None` while a segment sent earlier has not taken effect yet (a new one would be
+    /// built on a guess).
+    fn next_start(&self) -> Option<(u64, u64, CartState, JointState)> {
         let now = self.inp.status.tick.load(Ordering::Relaxed);
         if let Some(last) = self.sent.back() {
             let switched = self.switches.iter().any(|(_, id)| *id == last.id);
@@ -388,31 +400,30 @@ impl State {
         }
         let from = (now + (LEAD_S / self.inp.dt).ceil() as u64).max(self.inp.plan.first_tick);
         let active = self.inp.queues.stats.active.load(Ordering::Relaxed);
-        let start = self.sent.iter().find(|s| s.id == active).map_or_else(JointState::default, |s| s.at(from));
-        Some((from, active, start))
+        let base = self.sent.iter().find(|s| s.id == active);
+        let cart = base.map_or_else(CartState::default, |s| s.cart_at(from));
+        let offset = base.map_or_else(JointState::default, |s| s.at(from));
+        Some((from, active, cart, offset))
     }
 
     fn correct(&mut self) {
-        let Some((from, base, start)) = self.next_start() else { return };
-        let Some(planned) = self.inp.plan.at(from) else { return };
+        let Some((from, base, cart, offset)) = self.next_start() else { return };
         if from >= self.inp.plan.end_tick() {
             return;
         }
-        let (wanted, clamped) = wanted_correction(&self.inp.frame, &self.filter.position(), &self.corridor);
-        let Some(dq) = joint_offset(&planned.q, &wanted, &self.mount) else {
-            self.refused(from, "no joint offset moves the camera by the correction");
-            return;
-        };
-        let samples = self.rules().plan(from, &start, Some(&dq));
-        match samples {
-            Ok(samples) => {
-                if self.send(from, base, samples) {
-                    self.summary.max_correction_m = self.summary.max_correction_m.max(wanted.norm());
+        let (wanted, clamped) =
+            wanted_correction(&self.inp.frame, &self.filter.position(), &self.corridor);
+        match self.rules().plan(from, &cart, &offset, Some(&wanted)) {
+            Ok(planned) => {
+                let ticks = planned.offsets.len();
+                if self.send(from, base, planned) {
+                    self.summary.max_correction_m =
+                        self.summary.max_correction_m.max(wanted.norm());
                     self.record(
                         ClosedLoopTopic::Correction,
                         json!({ "tick": from, "id": self.next_id - 1, "based_on": base,
                                 "correction_lab_m": wanted.as_slice(), "clamped": clamped,
-                                "offset_rad": dq.as_slice() }),
+                                "ticks": ticks }),
                     );
                 }
             }
@@ -427,14 +438,14 @@ impl State {
 
     /// After the fallback: one segment from the offset in effect back to the plan.
     fn send_return(&mut self) {
-        let Some((from, base, start)) = self.next_start() else { return };
+        let Some((from, base, cart, offset)) = self.next_start() else { return };
         if base == 0 {
             self.return_sent = true;
             return;
         }
-        match self.rules().plan(from, &start, None) {
-            Ok(samples) => {
-                if self.send(from, base, samples) {
+        match self.rules().plan(from, &cart, &offset, None) {
+            Ok(planned) => {
+                if self.send(from, base, planned) {
                     self.return_sent = true;
                     self.record(ClosedLoopTopic::Correction, json!({ "tick": from, "id": self.next_id - 1, "based_on": base, "return_to_plan": true }));
                 }
@@ -447,10 +458,10 @@ impl State {
         }
     }
 
-    fn send(&mut self, from: u64, base: u64, samples: Vec<JointState>) -> bool {
+    fn send(&mut self, from: u64, base: u64, planned: Planned) -> bool {
         let Some(mut buf) = self.buffers.pop() else { return false };
         let id = self.next_id;
-        if !buf.fill(id, base, from, &samples) {
+        if !buf.fill(id, base, from, &planned.offsets) {
             self.buffers.push(buf);
             return false;
         }
@@ -458,7 +469,7 @@ impl State {
         if let Some(displaced) = self.inp.queues.incoming.force_push(buf) {
             self.buffers.push(displaced);
         }
-        self.sent.push_back(Sent { id, from_tick: from, samples });
+        self.sent.push_back(Sent { id, from_tick: from, planned });
         // Keep the segments a capture still waiting for its estimate may have been taken under.
         while self.sent.len() > 16 {
             self.sent.pop_front();

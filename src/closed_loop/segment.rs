@@ -1,23 +1,26 @@
-//! A correction as the tick will play it: from the offset in effect at its first tick, a Ruckig
-//! move to the new joint offset, a hold, and a Ruckig move back to zero (the plan), sampled at
-//! the control period; then every corrected setpoint it makes (plan plus offset) through the
-//! preflight's rules (`hitl_trajectories::preflight::check_move`: joint limits and table,
-//! velocity, acceleration, jerk, clearances, TCP speed) and the corridor. Only a segment that
-//! passes is handed to the tick.
-//!
-//! Ruckig moves the offset from whatever state it is in (position, velocity, acceleration):
-//! the offset is generated online, one segment per estimate, each continuing the one before.
+//! A correction as the tick will play it. The camera correction (lab metres, base frame) moves
+//! with Ruckig from its state at the segment's first tick (position, velocity, acceleration: the
+//! correction is generated online, each segment continuing the one in effect) to the new one,
+//! holds, and moves back to zero (the plan); at every tick the joint offset that displaces the
+//! camera of the planned setpoint by that correction, orientation kept, is solved on the xArm7's
+//! kinematics. Then every corrected setpoint (plan plus offset) goes through the preflight's
+//! rules (`hitl_trajectories::preflight::check_move`: joint limits and table, velocity,
+//! acceleration, jerk, clearances, TCP speed) and the corridor. Only a segment that passes is
+//! handed to the tick.
 
 use super::corridor::Corridor;
-use crate::control::motion::MoveLimits;
+use super::guidance::joint_offset;
 use hitl_hal::{JointState, Joints, Pose, DOF};
 use hitl_trajectories::lab::LabConfig;
 use hitl_trajectories::preflight::{check_move, MoveProfile};
+use nalgebra::Vector3;
 use ruckig::{InputParameter, Result as RuckigResult, Ruckig, Trajectory};
 
-/// Fraction of the lab's playback limits (velocity, acceleration, jerk) a correction's moves
-/// use, on top of the plan's own motion; the sum is checked against the full limits.
-pub const CORRECTION_LIMIT_FRACTION: f64 = 0.1;
+/// Limits of the camera correction's moves (lab): 10 mm/s, 50 mm/s^2, 500 mm/s^3 per axis. The
+/// plan's own motion comes on top; the sum is checked against the lab's full limits.
+pub const CORRECTION_SPEED_M_S: f64 = 0.010;
+pub const CORRECTION_ACCEL_M_S2: f64 = 0.050;
+pub const CORRECTION_JERK_M_S3: f64 = 0.500;
 
 /// The planned setpoints a segment corrects: the playback (from loop tick `first_tick`) and,
 /// after it, its last setpoint held at rest (the settle).
@@ -43,6 +46,21 @@ impl PlanTicks {
     }
 }
 
+/// The camera correction's state at one tick (lab metres, base frame).
+#[derive(Debug, Clone, Copy, PartialEq, Default)]
+pub struct CartState {
+    pub p: Vector3<f64>,
+    pub v: Vector3<f64>,
+    pub a: Vector3<f64>,
+}
+
+/// A planned correction: per tick from its first, the camera correction and the joint offset.
+#[derive(Debug, Clone, Default)]
+pub struct Planned {
+    pub cart: Vec<CartState>,
+    pub offsets: Vec<JointState>,
+}
+
 /// Everything a segment is planned and checked against.
 #[derive(Debug, Clone)]
 pub struct SegmentRules<'a> {
@@ -50,9 +68,9 @@ pub struct SegmentRules<'a> {
     pub lab: &'a LabConfig,
     pub mount: Pose,
     pub corridor: Corridor,
-    pub limits: MoveLimits,
     pub dt: f64,
-    /// Ticks the new offset is held after its move (cut at the end of the playback).
+    /// Ticks the new correction is held after its move (to the end of the playback when that is
+    /// nearer than two holds).
     pub hold_ticks: u64,
     /// The return to the plan must be complete by this tick (within the settle).
     pub return_by_tick: u64,
@@ -60,92 +78,119 @@ pub struct SegmentRules<'a> {
     pub capacity: usize,
 }
 
-impl<'a> SegmentRules<'a> {
-    /// The lab's limits scaled by [`CORRECTION_LIMIT_FRACTION`].
-    pub fn correction_limits(lab: &LabConfig) -> MoveLimits {
-        let l = &lab.limits;
-        let f = CORRECTION_LIMIT_FRACTION;
-        MoveLimits {
-            velocity: l.velocity_rad_s.map(|v| f * v),
-            acceleration: l.acceleration_rad_s2.map(|v| f * v),
-            jerk: l.jerk_rad_s3.map(|v| f * v),
-        }
-    }
-
-    /// The offsets from `from_tick` (sample 0: `start`, the offset in effect there) moving to
-    /// `goal` (or to zero when `goal` is `None`: back to the plan), checked. `Err` says why it
-    /// was refused.
+impl SegmentRules<'_> {
+    /// The correction from `from_tick`, starting from `start` (the correction in effect there,
+    /// whose joint offset is `start_offset`), moving to `goal` (or back to zero when `None`),
+    /// checked. `Err` says why it was refused.
     pub fn plan(
         &self,
         from_tick: u64,
-        start: &JointState,
-        goal: Option<&Joints>,
-    ) -> Result<Vec<JointState>, String> {
+        start: &CartState,
+        start_offset: &JointState,
+        goal: Option<&Vector3<f64>>,
+    ) -> Result<Planned, String> {
         if from_tick < self.plan.first_tick {
             return Err("a correction cannot start before the playback".into());
         }
-        let zero = [0.0; DOF];
-        let mut out = vec![*start];
-        let to = goal.unwrap_or(&zero);
-        out.extend(self.move_to(start, to)?);
+        let to = goal.copied().unwrap_or_else(Vector3::zeros);
+        if to.norm() > self.corridor.radius_m + 1e-9 {
+            return Err("the correction is wider than the corridor".into());
+        }
+        let mut cart = vec![*start];
+        cart.extend(self.move_to(start, &to)?);
         if goal.is_some() {
-            // Held for `hold_ticks`; to the end of the playback when that is nearer than two.
-            let moved_by = from_tick + out.len() as u64;
+            let moved_by = from_tick + cart.len() as u64;
             let end = self.plan.end_tick();
             let natural = moved_by + self.hold_ticks;
-            let hold_end = if natural + self.hold_ticks >= end { end.max(moved_by) } else { natural };
-            out.extend(std::iter::repeat_n(JointState::rest(*to), (hold_end - moved_by) as usize));
-            out.extend(self.move_to(&JointState::rest(*to), &zero)?);
+            let hold_end =
+                if natural + self.hold_ticks >= end { end.max(moved_by) } else { natural };
+            let rest = CartState { p: to, ..CartState::default() };
+            cart.extend(std::iter::repeat_n(rest, (hold_end - moved_by) as usize));
+            cart.extend(self.move_to(&rest, &Vector3::zeros())?);
         }
-        if out.len() > self.capacity {
-            return Err(format!("the correction needs {} ticks, more than {}", out.len(), self.capacity));
+        if cart.len() > self.capacity {
+            return Err(format!(
+                "the correction needs {} ticks, more than {}",
+                cart.len(),
+                self.capacity
+            ));
         }
-        if from_tick + out.len() as u64 > self.return_by_tick {
+        if from_tick + cart.len() as u64 > self.return_by_tick {
             return Err("the return to the plan would not end within the settle".into());
         }
-        self.check(from_tick, &out)?;
-        Ok(out)
+        let offsets = self.joint_offsets(from_tick, &cart, start_offset)?;
+        self.check(from_tick, &offsets)?;
+        Ok(Planned { cart, offsets })
     }
 
-    /// A Ruckig move of the offset from `from` (any state) to rest at `to`, sampled after `from`.
-    fn move_to(&self, from: &JointState, to: &Joints) -> Result<Vec<JointState>, String> {
-        let values = from.q.iter().chain(&from.qd).chain(&from.qdd).chain(to);
+    /// A Ruckig move of the correction from `from` (any state) to rest at `to`, sampled after
+    /// `from`.
+    fn move_to(&self, from: &CartState, to: &Vector3<f64>) -> Result<Vec<CartState>, String> {
+        let values = from.p.iter().chain(&from.v).chain(&from.a).chain(to);
         if values.into_iter().any(|v| !v.is_finite()) {
             return Err("a correction is not finite".into());
         }
-        let still = from.qd.iter().chain(&from.qdd).all(|v| *v == 0.0);
-        if still && from.q.iter().zip(to).all(|(a, b)| (a - b).abs() < 1e-12) {
+        if from.v == Vector3::zeros() && from.a == Vector3::zeros() && (from.p - to).norm() < 1e-12
+        {
             return Ok(Vec::new());
         }
-        let l = &self.limits;
-        let mut input = InputParameter::new(DOF);
-        input.current_position = from.q.to_vec();
-        input.current_velocity = from.qd.to_vec();
+        let mut input = InputParameter::new(3);
+        input.current_position = from.p.as_slice().to_vec();
+        input.current_velocity = from.v.as_slice().to_vec();
         input.current_acceleration =
-            (0..DOF).map(|j| from.qdd[j].clamp(-l.acceleration[j], l.acceleration[j])).collect();
-        input.target_position = to.to_vec();
-        input.max_velocity = l.velocity.to_vec();
-        input.max_acceleration = l.acceleration.to_vec();
-        input.max_jerk = l.jerk.to_vec();
-        let mut ruckig = Ruckig::new_direct_and_offline(DOF);
-        let mut traj = Trajectory::new_direct(DOF);
+            from.a.iter().map(|a| a.clamp(-CORRECTION_ACCEL_M_S2, CORRECTION_ACCEL_M_S2)).collect();
+        input.target_position = to.as_slice().to_vec();
+        input.max_velocity = vec![CORRECTION_SPEED_M_S; 3];
+        input.max_acceleration = vec![CORRECTION_ACCEL_M_S2; 3];
+        input.max_jerk = vec![CORRECTION_JERK_M_S3; 3];
+        let mut ruckig = Ruckig::new_direct_and_offline(3);
+        let mut traj = Trajectory::new_direct(3);
         match ruckig.calculate(&mut input, &mut traj) {
             RuckigResult::Working | RuckigResult::Finished => {}
             other => return Err(format!("Ruckig refused the correction: {other:?}")),
         }
         let duration = traj.get_duration();
         let steps = (duration / self.dt).ceil().max(1.0) as usize;
-        let mut out = Vec::with_capacity(steps);
-        for i in 1..=steps {
-            let (p, v, a) = traj.at_time((i as f64 * self.dt).min(duration));
-            let mut s = JointState::default();
-            s.q.copy_from_slice(&p);
-            s.qd.copy_from_slice(&v);
-            s.qdd.copy_from_slice(&a);
-            out.push(s);
-        }
+        let v3 = |x: &[f64]| Vector3::new(x[0], x[1], x[2]);
+        let mut out: Vec<CartState> = (1..=steps)
+            .map(|i| {
+                let (p, v, a) = traj.at_time((i as f64 * self.dt).min(duration));
+                CartState { p: v3(&p), v: v3(&v), a: v3(&a) }
+            })
+            .collect();
         if let Some(last) = out.last_mut() {
-            *last = JointState::rest(*to);
+            *last = CartState { p: *to, ..CartState::default() };
+        }
+        Ok(out)
+    }
+
+    /// The joint offset of every tick (sample 0: `start`, the offset in effect), its velocity and
+    /// acceleration by backward differences.
+    fn joint_offsets(
+        &self,
+        from_tick: u64,
+        cart: &[CartState],
+        start: &JointState,
+    ) -> Result<Vec<JointState>, String> {
+        let mut out = Vec::with_capacity(cart.len());
+        out.push(*start);
+        for (i, c) in cart.iter().enumerate().skip(1) {
+            let k = from_tick + i as u64;
+            let planned = self.plan.at(k).ok_or("a correction outside the plan")?;
+            let prev = out[i - 1];
+            let q = if c.p == Vector3::zeros() {
+                [0.0; DOF]
+            } else {
+                // From the plan itself (not the previous tick's offset): the offset is then a
+                // function of the planned joints and the correction alone, smooth along the
+                // plan and zero with the correction (no drift along the arm's self-motion).
+                joint_offset(&planned.q, &c.p, &self.mount, &[0.0; DOF]).ok_or_else(|| {
+                    format!("no joint offset moves the camera by the correction at tick {k}")
+                })?
+            };
+            let qd: Joints = std::array::from_fn(|j| (q[j] - prev.q[j]) / self.dt);
+            let qdd: Joints = std::array::from_fn(|j| (qd[j] - prev.qd[j]) / self.dt);
+            out.push(JointState { q, qd, qdd });
         }
         Ok(out)
     }
@@ -188,6 +233,7 @@ impl<'a> SegmentRules<'a> {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use hitl_trajectories::kinematics::camera_pose;
 
     fn rules<'a>(plan: &'a PlanTicks, lab: &'a LabConfig, corridor_m: f64) -> SegmentRules<'a> {
         SegmentRules {
@@ -195,7 +241,6 @@ mod tests {
             lab,
             mount: lab.camera_mount(),
             corridor: Corridor::new(corridor_m).expect("valid"),
-            limits: SegmentRules::correction_limits(lab),
             dt: 0.004,
             hold_ticks: 100,
             return_by_tick: plan.end_tick() + 250,
@@ -204,35 +249,47 @@ mod tests {
     }
 
     #[test]
-    fn a_segment_moves_holds_and_returns_to_the_plan_within_the_limits() {
+    fn a_segment_moves_the_camera_holds_and_returns_to_the_plan() {
         let lab = LabConfig::default();
-        let plan = PlanTicks { first_tick: 10, playback: vec![JointState::rest(lab.arm.rest_q); 2000] };
+        let plan =
+            PlanTicks { first_tick: 10, playback: vec![JointState::rest(lab.arm.rest_q); 2000] };
         let r = rules(&plan, &lab, 0.003);
-        let goal = [0.002, -0.001, 0.0, 0.001, 0.0, 0.0, 0.0];
-        let s = r.plan(20, &JointState::default(), Some(&goal)).expect("passes");
-        assert_eq!(s[0], JointState::default(), "starts from the offset in effect");
-        assert_eq!(s.last().expect("samples").q, [0.0; DOF], "ends on the plan");
-        assert!(s.iter().any(|o| o.q == goal), "holds the goal");
-        let lim = SegmentRules::correction_limits(&lab);
-        for w in s.windows(2) {
-            for j in 0..DOF {
-                assert!(w[1].qd[j].abs() <= lim.velocity[j] + 1e-9);
-                assert!((w[1].q[j] - w[0].q[j]).abs() <= lim.velocity[j] * 0.004 + 1e-9);
-            }
+        let goal = Vector3::new(0.002, -0.001, 0.001);
+        let s =
+            r.plan(20, &CartState::default(), &JointState::default(), Some(&goal)).expect("passes");
+        assert_eq!(s.offsets[0], JointState::default(), "starts from the offset in effect");
+        assert_eq!(s.offsets.last().expect("samples").q, [0.0; DOF], "ends on the plan");
+        let mount = lab.camera_mount();
+        let at = |q: &Joints| camera_pose(q, &mount).translation.vector;
+        let held = s.cart.iter().position(|c| c.p == goal).expect("holds the goal");
+        let q: Joints = std::array::from_fn(|j| lab.arm.rest_q[j] + s.offsets[held].q[j]);
+        assert!((at(&q) - at(&lab.arm.rest_q) - goal).norm() < 1e-6, "the camera moved by it");
+        for c in &s.cart {
+            assert!(c.v.amax() <= CORRECTION_SPEED_M_S + 1e-9);
         }
     }
 
     #[test]
-    fn a_segment_leaving_the_corridor_is_refused() {
+    fn a_correction_wider_than_the_corridor_is_refused_and_a_return_always_planned() {
         let lab = LabConfig::default();
-        let plan = PlanTicks { first_tick: 0, playback: vec![JointState::rest(lab.arm.rest_q); 2000] };
+        let plan =
+            PlanTicks { first_tick: 0, playback: vec![JointState::rest(lab.arm.rest_q); 2000] };
         let r = rules(&plan, &lab, 0.001);
-        let goal = [0.02, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0]; // ~1 cm at the camera
-        let err = r.plan(5, &JointState::default(), Some(&goal)).expect_err("refused");
-        assert!(err.contains("corridor"), "{err}");
-        // Back to the plan from a moving offset is always a move of its own.
-        let moving = JointState { q: [0.0005; DOF], qd: [0.01; DOF], qdd: [0.0; DOF] };
-        let back = r.plan(5, &moving, None).expect("return passes");
-        assert_eq!(back.last().expect("samples").q, [0.0; DOF]);
+        let wide = Vector3::new(0.002, 0.0, 0.0);
+        let err = r.plan(5, &CartState::default(), &JointState::default(), Some(&wide));
+        assert!(err.expect_err("refused").contains("corridor"));
+        // Back to the plan from a moving correction.
+        let moving = CartState {
+            p: Vector3::new(0.0008, 0.0, 0.0),
+            v: Vector3::new(0.002, 0.0, 0.0),
+            a: Vector3::zeros(),
+        };
+        let dq =
+            joint_offset(&lab.arm.rest_q, &moving.p, &lab.camera_mount(), &[0.0; DOF]).expect("ik");
+        let back = r
+            .plan(5, &moving, &JointState { q: dq, ..JointState::default() }, None)
+            .expect("return passes");
+        assert_eq!(back.offsets.last().expect("samples").q, [0.0; DOF]);
+        assert!(back.cart.iter().all(|c| c.p.norm() <= 0.001 + 1e-9), "the overshoot stays inside");
     }
 }

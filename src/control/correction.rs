@@ -54,7 +54,8 @@ impl CorrectionSegment {
             return false;
         }
         self.samples[..samples.len()].copy_from_slice(samples);
-        (self.id, self.based_on, self.from_tick, self.len) = (id, based_on, from_tick, samples.len());
+        (self.id, self.based_on, self.from_tick, self.len) =
+            (id, based_on, from_tick, samples.len());
         true
     }
 
@@ -147,7 +148,8 @@ impl CorrectionStage {
         let Some(link) = self.link.as_mut() else { return planned };
         link.take_incoming(k);
         link.switch_at(k);
-        let corrects = matches!(phase, Phase::LeadIn | Phase::Playback | Phase::LeadOut | Phase::Settle);
+        let corrects =
+            matches!(phase, Phase::LeadIn | Phase::Playback | Phase::LeadOut | Phase::Settle);
         let Some(seg) = link.current.as_ref().filter(|_| corrects) else { return planned };
         let off = seg.at(k);
         let mut out = planned;

@@ -940,12 +940,9 @@ fn start_navigator(
     let (Some(config), Some(frame)) = (req.closed_loop, plan_frame) else {
         return Ok((CorrectionStage::open_loop(), None));
     };
-    let results = capture
-        .navigation
-        .lock()
-        .ok()
-        .and_then(|mut r| r.take())
-        .ok_or_else(|| RunError::Device("--closed-loop: no pose estimates to navigate on".into()))?;
+    let results = capture.navigation.lock().ok().and_then(|mut r| r.take()).ok_or_else(|| {
+        RunError::Device("--closed-loop: no pose estimates to navigate on".into())
+    })?;
     let first_tick = program.approach.len() as u64;
     let capture_ticks = program
         .capture
