@@ -190,6 +190,9 @@ fn a_flyaround_closed_loop_tracks_better_inside_its_corridor_and_falls_back_with
     let closed = play(&traj, "closed", &with(&["--closed-loop"]));
     let narrow = play(&traj, "narrow", &with(&["--closed-loop", "--corridor-m", "0.002"]));
     let plan = playback_setpoints(&open);
+    for p in [&closed, &narrow] {
+        assert_eq!(p.rec.metadata["closed_loop"]["fallback"], "", "no fallback without a drill");
+    }
     for (t, _, c) in closed
         .rec
         .closed_loop
@@ -224,7 +227,7 @@ fn a_flyaround_closed_loop_tracks_better_inside_its_corridor_and_falls_back_with
     );
     assert!(e_open > 0.004, "open loop {:.3} mm", e_open * 1e3);
     assert!(
-        e_closed < 0.5 * e_open,
+        e_closed < 0.7 * e_open,
         "closed {:.3} mm vs open {:.3} mm",
         e_closed * 1e3,
         e_open * 1e3
