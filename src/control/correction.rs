@@ -184,7 +184,7 @@ impl StageLink {
     }
 
     fn switch_at(&mut self, k: u64) {
-        if !self.pending.as_ref().is_some_and(|p| p.from_tick <= k) {
+        if self.pending.as_ref().is_none_or(|p| p.from_tick > k) {
             return;
         }
         let Some(next) = self.pending.take() else { return };
