@@ -262,3 +262,25 @@ fn a_flyaround_closed_loop_tracks_better_inside_its_corridor_and_falls_back_with
         assert!(d < 1e-6, "tick {i}: {:.4} mm from the plan after the fallback", d * 1e3);
     }
 }
+
+#[test]
+fn closed_loop_refuses_what_it_cannot_close_on_before_anything_moves() {
+    let dir = tempfile::tempdir().expect("tempdir");
+    let traj = plan(dir.path(), "station-keeping", "10", "5");
+    let traj = traj.to_str().expect("utf-8");
+    let base = ["run", traj, "--plain", "--config", SHARED_VM_LAB, "--closed-loop"];
+    let cases: [(&[&str], &str); 3] = [
+        (&["--camera", "none"], "needs a camera and a pose estimator"),
+        (&["--camera", "sim", "--perception", "icp", "--corridor-m", "0"], "--corridor-m"),
+        (&["--camera", "sim", "--perception", "icp", "--corridor-m", "0.2"], "--corridor-m"),
+    ];
+    for (extra, says) in cases {
+        let out = hitl(&[&base[..], extra].concat());
+        assert_eq!(out.status.code(), Some(2), "{extra:?}: {}", text(&out));
+        assert!(text(&out).contains(says), "{extra:?}: {}", text(&out));
+        assert!(!text(&out).contains("approach"), "nothing moved: {}", text(&out));
+    }
+    // --corridor-m means nothing open loop.
+    let out = hitl(&["run", traj, "--corridor-m", "0.004"]);
+    assert_eq!(out.status.code(), Some(2), "{}", text(&out));
+}

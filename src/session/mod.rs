@@ -1,8 +1,9 @@
 //! A run from start to exit code. [`run`] reads top to bottom as the steps of a run: load and
 //! preflight; start the arm's side (the embedded stub); open and start the devices; start the
 //! capture path (recorder, perception, frame intake); connect the arm, identify it, enable it;
-//! plan the approach and the retreat around the lab's obstacles; play on the real-time thread;
-//! stop the devices; close the capture path and the recording. Everything that allocates or
+//! plan the approach and the retreat around the lab's obstacles; play on the real-time thread
+//! (with `--closed-loop`, beside the closed loop's navigator, `crate::closed_loop`); stop the
+//! devices; close the capture path and the recording. Everything that allocates or
 //! blocks happens here, before or after the loop; the loop itself is [`crate::control::tick`], which
 //! borrows the devices this module owns.
 //!
