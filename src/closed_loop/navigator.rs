@@ -28,7 +28,7 @@ use std::time::Duration;
 /// Segment buffers in circulation between the navigator and the tick.
 const BUFFERS: usize = 4;
 /// A new segment starts this long after the tick the navigator last saw (time to reach the tick).
-const LEAD_S: f64 = 0.1;
+const LEAD_S: f64 = 0.3;
 
 /// What the navigator needs from the run.
 pub struct NavigatorInputs {
