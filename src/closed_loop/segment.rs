@@ -278,12 +278,9 @@ mod tests {
         let wide = Vector3::new(0.002, 0.0, 0.0);
         let err = r.plan(5, &CartState::default(), &JointState::default(), Some(&wide));
         assert!(err.expect_err("refused").contains("corridor"));
-        // Back to the plan from a moving correction.
-        let moving = CartState {
-            p: Vector3::new(0.0008, 0.0, 0.0),
-            v: Vector3::new(0.002, 0.0, 0.0),
-            a: Vector3::zeros(),
-        };
+        // Back to the plan from a correction in effect (held: the joint offset given with it
+        // has no velocity either).
+        let moving = CartState { p: Vector3::new(0.0008, 0.0, 0.0), ..CartState::default() };
         let dq =
             joint_offset(&lab.arm.rest_q, &moving.p, &lab.camera_mount(), &[0.0; DOF]).expect("ik");
         let back = r
