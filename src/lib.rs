@@ -3,6 +3,7 @@
 //!
 //! - [`rt`]: the real-time thread: fixed period, absolute deadlines, OS real-time settings;
 //! - [`control`]: the run (state machine, interlocks, the tick, approach and stop planning);
+//! - [`closed_loop`]: `--closed-loop`: relative navigation, guidance and the corridor, off the loop;
 //! - [`devices`]: absent ("none") devices and device choices;
 //! - [`cli`]: one module per subcommand; [`exit`]: the contract's exit codes; [`console`]: output
 //!   that a closed pipe cannot turn into a panic.
@@ -10,6 +11,7 @@
 pub mod bench;
 pub mod capture;
 pub mod cli;
+pub mod closed_loop;
 pub mod console;
 pub mod control;
 pub mod devices;

@@ -3,6 +3,7 @@
 //! nothing, with the fake arm and with the real `XarmClient` talking to the stub's protocol
 //! server. (End-to-end runs against the MuJoCo stub are in `run_stub.rs`.)
 
+use hitl::control::correction::{CorrectionQueues, CorrectionSegment, CorrectionStage};
 use hitl::control::interlocks::{Interlocks, Thresholds};
 use hitl::control::motion::{plan_move, MoveLimits};
 use hitl::control::stop::StopPlanner;
@@ -155,6 +156,29 @@ struct Ran {
 }
 
 fn run(program: &Program, script: Script, operator_stop_at: Option<u64>) -> Ran {
+    run_with(program, script, operator_stop_at, CorrectionStage::open_loop(), None)
+}
+
+/// [`run`] with a correction stage, and segments a navigator hands over while the loop runs:
+/// each waits until the one before it has taken effect.
+fn run_with(
+    program: &Program,
+    script: Script,
+    operator_stop_at: Option<u64>,
+    correction: CorrectionStage,
+    feed: Option<(CorrectionQueues, Vec<CorrectionSegment>)>,
+) -> Ran {
+    if let Some((queues, segments)) = feed {
+        std::thread::spawn(move || {
+            for seg in segments {
+                let id = seg.id;
+                queues.incoming.push(seg).expect("room");
+                while queues.stats.active.load(Ordering::Relaxed) != id {
+                    std::thread::sleep(Duration::from_millis(1));
+                }
+            }
+        });
+    }
     let clock = MonotonicClock::new();
     let (slot, reports) = LatestSlot::new();
     slot.publish(ArmState { received_ns: clock.now_ns(), q: START, ..Default::default() });
@@ -187,7 +211,8 @@ fn run(program: &Program, script: Script, operator_stop_at: Option<u64>) -> Ran 
         trigger: NoTrigger,
     };
     let io = LoopIo { reports, telemetry: NoTelemetry, status, health, stop, clock };
-    let control = ControlLoop::new(program, devices, io, interlocks, RATE, &START);
+    let control = ControlLoop::new(program, devices, io, interlocks, RATE, &START)
+        .with_correction(correction);
     let before = (RT_ALLOCATIONS.load(Ordering::Relaxed), RT_FREES.load(Ordering::Relaxed));
     let outcome = control.run(Duration::ZERO);
     let allocations = RT_ALLOCATIONS.load(Ordering::Relaxed) - before.0;
@@ -240,6 +265,47 @@ fn a_whole_playback_sends_approach_then_trajectory_and_allocates_nothing() {
     );
     assert_eq!(ran.sent.last(), expected.last(), "settles on the last waypoint");
     assert!(!ran.stopped);
+}
+
+#[test]
+fn closed_loop_corrections_are_added_in_the_playback_without_allocating() {
+    let _one = serial();
+    let p = program();
+    let first = p.approach.len() as u64;
+    // Two segments on joint 2: up to 0.004 rad and held, then a second continuing from it back
+    // to zero (the navigator's shape, here written by hand).
+    let up: Vec<JointState> = (0..40)
+        .map(|i| {
+            let mut s = JointState::default();
+            s.q[1] = 0.004 * (i.min(20) as f64 / 20.0);
+            s
+        })
+        .collect();
+    let mut down: Vec<JointState> = (0..21)
+        .map(|i| {
+            let mut s = JointState::default();
+            s.q[1] = 0.004 * (1.0 - i as f64 / 20.0);
+            s
+        })
+        .collect();
+    down[0] = up[30];
+    let queues = CorrectionQueues::new(2);
+    let (mut a, mut b) =
+        (CorrectionSegment::with_capacity(64), CorrectionSegment::with_capacity(64));
+    assert!(a.fill(1, 0, first + 10, &up));
+    assert!(b.fill(2, 1, first + 40, &down));
+    let stage = CorrectionStage::closed_loop(queues.clone());
+    let ran = run_with(&p, Script::default(), None, stage, Some((queues.clone(), vec![a, b])));
+    assert!(matches!(ran.outcome, Outcome::Completed { .. }), "{:?}", ran.outcome);
+    assert_eq!(ran.allocations, 0, "the corrected tick allocated");
+    assert_eq!(ran.frees, 0, "the corrected tick freed");
+    assert_eq!(queues.stats.taken.load(Ordering::Relaxed), 2);
+    assert_eq!(queues.stats.refused.load(Ordering::Relaxed), 0);
+    let at = |k: u64| ran.sent[k as usize][1] - p.playback[(k - first) as usize].q[1];
+    assert_eq!(at(first + 5), 0.0, "before the first segment: the plan");
+    assert!((at(first + 35) - 0.004).abs() < 1e-12, "held");
+    assert!((at(first + 50) - 0.002).abs() < 1e-12, "the second segment continues");
+    assert_eq!(at(first + 100), 0.0, "after the last: the plan again");
 }
 
 #[test]

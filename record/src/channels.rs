@@ -25,9 +25,12 @@ pub(crate) enum Ch {
     CaptureSync,
     TriggerFired,
     Stats,
+    ClosedLoopFilter,
+    ClosedLoopCorrection,
+    ClosedLoopGate,
 }
 
-pub(crate) const CHANNELS: [Ch; 15] = [
+pub(crate) const CHANNELS: [Ch; 18] = [
     Ch::Setpoint,
     Ch::State,
     Ch::Timing,
@@ -43,6 +46,9 @@ pub(crate) const CHANNELS: [Ch; 15] = [
     Ch::CaptureSync,
     Ch::TriggerFired,
     Ch::Stats,
+    Ch::ClosedLoopFilter,
+    Ch::ClosedLoopCorrection,
+    Ch::ClosedLoopGate,
 ];
 
 impl Ch {
@@ -63,6 +69,9 @@ impl Ch {
             Ch::CaptureSync => topics::CAPTURE_SYNC,
             Ch::TriggerFired => topics::TRIGGER_FIRED,
             Ch::Stats => topics::RECORDER_STATS,
+            Ch::ClosedLoopFilter => topics::CLOSED_LOOP_FILTER,
+            Ch::ClosedLoopCorrection => topics::CLOSED_LOOP_CORRECTION,
+            Ch::ClosedLoopGate => topics::CLOSED_LOOP_GATE,
         }
     }
 

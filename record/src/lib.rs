@@ -35,8 +35,9 @@ pub use health::RecorderHealth;
 pub use live::{LiveConfig, LiveError, LiveServer, LiveSummary, LiveTap};
 pub use metadata::{RunMetadata, SunPhaseTrack};
 pub use msg::{
-    ArmStateMsg, CaptureSyncMsg, DepthImage, EventDetail, EventKind, FrameRecord, LightMsg, Phase,
-    Plane, PoseStamped, SafetyEventMsg, SetpointMsg, TfMsg, TimingMsg, TriggerFiredMsg,
+    ArmStateMsg, CaptureSyncMsg, ClosedLoopMsg, ClosedLoopTopic, DepthImage, EventDetail,
+    EventKind, FrameRecord, LightMsg, Phase, Plane, PoseStamped, SafetyEventMsg, SetpointMsg,
+    TfMsg, TimingMsg, TriggerFiredMsg,
 };
 pub use queues::{QueueCapacity, Telemetry};
 pub use recorder::{Recorder, RecorderConfig, RecorderHandle};

@@ -246,6 +246,26 @@ impl TfMsg {
     }
 }
 
+/// Which of the closed loop's topics a [`ClosedLoopMsg`] goes to.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum ClosedLoopTopic {
+    /// `/closed_loop/filter`.
+    Filter,
+    /// `/closed_loop/correction`.
+    Correction,
+    /// `/closed_loop/gate`.
+    Gate,
+}
+
+/// A `/closed_loop/*` message: JSON written by the navigator (`hitl run --closed-loop`,
+/// docs/mcap-topics.md gives each topic's fields).
+#[derive(Debug, Clone, PartialEq)]
+pub struct ClosedLoopMsg {
+    pub topic: ClosedLoopTopic,
+    pub t_ns: u64,
+    pub value: serde_json::Value,
+}
+
 /// `/pose/gt` or `/pose/estimate`: the target's pose in the camera frame (OpenCV axes),
 /// stamped with the capture time of the frame it belongs to.
 #[derive(Debug, Clone, Copy, PartialEq)]

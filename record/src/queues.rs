@@ -5,8 +5,8 @@
 //! is counted and reported as a `capture-not-recorded` safety event, never dropped silently.
 
 use crate::msg::{
-    ArmStateMsg, EventKind, FrameRecord, LightMsg, PoseStamped, SafetyEventMsg, SetpointMsg, TfMsg,
-    TimingMsg, TriggerFiredMsg,
+    ArmStateMsg, ClosedLoopMsg, ClosedLoopTopic, EventKind, FrameRecord, LightMsg, PoseStamped,
+    SafetyEventMsg, SetpointMsg, TfMsg, TimingMsg, TriggerFiredMsg,
 };
 use crossbeam_queue::ArrayQueue;
 use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
@@ -41,9 +41,10 @@ pub(crate) enum Counted {
     Tf = 5,
     Estimate = 6,
     Fired = 7,
+    ClosedLoop = 8,
 }
 
-pub(crate) const COUNTED_TOPICS: [(Counted, &str); 8] = [
+pub(crate) const COUNTED_TOPICS: [(Counted, &str); 9] = [
     (Counted::Setpoint, crate::topics::SETPOINT),
     (Counted::State, crate::topics::STATE),
     (Counted::Timing, crate::topics::TIMING),
@@ -52,6 +53,7 @@ pub(crate) const COUNTED_TOPICS: [(Counted, &str); 8] = [
     (Counted::Tf, crate::topics::TF),
     (Counted::Estimate, crate::topics::POSE_ESTIMATE),
     (Counted::Fired, crate::topics::TRIGGER_FIRED),
+    (Counted::ClosedLoop, "/closed_loop/*"),
 ];
 
 pub(crate) struct Queues {
@@ -64,7 +66,9 @@ pub(crate) struct Queues {
     pub estimate: ArrayQueue<PoseStamped>,
     pub fired: ArrayQueue<TriggerFiredMsg>,
     pub frames: ArrayQueue<FrameRecord>,
-    pub drops: [AtomicU64; 8],
+    /// The closed loop's messages (from the navigator's thread, never the tick).
+    pub closed_loop: ArrayQueue<ClosedLoopMsg>,
+    pub drops: [AtomicU64; 9],
     pub frames_not_recorded: AtomicU64,
     /// Metadata records to write (from the session thread, never the tick): name and map.
     pub metadata: std::sync::Mutex<Vec<(String, std::collections::BTreeMap<String, String>)>>,
@@ -101,6 +105,7 @@ impl Telemetry {
                 estimate: ArrayQueue::new(t),
                 fired: ArrayQueue::new(t),
                 frames: ArrayQueue::new(cap.frames.max(1)),
+                closed_loop: ArrayQueue::new(t),
                 drops: Default::default(),
                 frames_not_recorded: AtomicU64::new(0),
                 metadata: Default::default(),
@@ -161,6 +166,13 @@ impl Telemetry {
     /// `/pose/estimate` from the perception worker, stamped with the frame's capture time.
     pub fn push_pose_estimate(&self, m: &PoseStamped) {
         self.push_counted(&self.q.estimate, Counted::Estimate, *m);
+    }
+
+    /// One of the closed loop's `/closed_loop/*` messages (allocates: the navigator's thread,
+    /// never the tick). Never blocks; drops the oldest when full.
+    pub fn push_closed_loop(&self, topic: ClosedLoopTopic, t_ns: u64, value: serde_json::Value) {
+        let m = ClosedLoopMsg { topic, t_ns, value };
+        self.push_counted(&self.q.closed_loop, Counted::ClosedLoop, m);
     }
 
     /// Queue a capture for recording (camera intake, not the tick). Returns false when the

@@ -330,6 +330,8 @@ pub struct Recording {
     pub pose_estimate: Vec<PoseStamped>,
     /// `/recorder/stats` messages, in order.
     pub recorder_stats: Vec<serde_json::Value>,
+    /// `/closed_loop/*` messages (topic, log time, message), in file order.
+    pub closed_loop: Vec<(String, u64, serde_json::Value)>,
     pub depth_images: Vec<ImageInfo>,
     /// Messages per topic.
     pub topic_counts: BTreeMap<String, u64>,
@@ -574,6 +576,10 @@ fn decode_into(rec: &mut Recording, m: &RawMessage<'_>) -> Result<(), String> {
         topics::EVENT => rec.events.push(serde_json::from_slice(m.data).map_err(|x| e(&x))?),
         topics::RECORDER_STATS => {
             rec.recorder_stats.push(serde_json::from_slice(m.data).map_err(|x| e(&x))?)
+        }
+        topics::CLOSED_LOOP_FILTER | topics::CLOSED_LOOP_CORRECTION | topics::CLOSED_LOOP_GATE => {
+            let v = serde_json::from_slice(m.data).map_err(|x| e(&x))?;
+            rec.closed_loop.push((m.topic.to_string(), m.log_time, v));
         }
         topics::TF => {
             if let Some(tf) = decode_tf(m.data, m.log_time)? {

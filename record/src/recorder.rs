@@ -324,6 +324,10 @@ impl Worker {
             n += 1;
             self.with_sink(|s| s.event(&m));
         }
+        while let Some(m) = q.closed_loop.pop() {
+            n += 1;
+            self.with_sink(|s| s.closed_loop(&m));
+        }
         n
     }
 

@@ -210,6 +210,16 @@ impl McapSink {
         self.json(Ch::Stats, t_ns, v)
     }
 
+    /// One of the closed loop's `/closed_loop/*` messages.
+    pub fn closed_loop(&mut self, m: &crate::msg::ClosedLoopMsg) -> Result<(), RecordError> {
+        let ch = match m.topic {
+            crate::msg::ClosedLoopTopic::Filter => Ch::ClosedLoopFilter,
+            crate::msg::ClosedLoopTopic::Correction => Ch::ClosedLoopCorrection,
+            crate::msg::ClosedLoopTopic::Gate => Ch::ClosedLoopGate,
+        };
+        self.json(ch, m.t_ns, &m.value)
+    }
+
     pub fn tf(&mut self, m: &TfMsg) -> Result<(), RecordError> {
         let t = m.t_ns;
         let msg = fg::FrameTransforms {

@@ -18,6 +18,13 @@ pub const CAPTURE_SYNC: &str = "/camera/sync";
 pub const TRIGGER_FIRED: &str = "/trigger/fired";
 /// Extension: the recorder's own counters, once a second and at close.
 pub const RECORDER_STATS: &str = "/recorder/stats";
+/// Extension (`hitl run --closed-loop`): the relative-navigation filter's state and covariance
+/// after each estimate.
+pub const CLOSED_LOOP_FILTER: &str = "/closed_loop/filter";
+/// Extension (`--closed-loop`): each correction sent to the tick, or refused.
+pub const CLOSED_LOOP_CORRECTION: &str = "/closed_loop/correction";
+/// Extension (`--closed-loop`): each capture's gating decision (used, or why not).
+pub const CLOSED_LOOP_GATE: &str = "/closed_loop/gate";
 
 /// Metadata record names.
 pub const META_RUN: &str = "run";
@@ -72,6 +79,18 @@ pub(crate) fn json_schema(topic: &str) -> Option<(&'static str, String)> {
         RECORDER_STATS => (
             "hitl.RecorderStats",
             r#"{"type":"object","properties":{"t_ns":{"type":"integer"},"written":{"type":"object","additionalProperties":{"type":"integer"}},"dropped":{"type":"object","additionalProperties":{"type":"integer"}},"frames_not_recorded":{"type":"integer"},"bytes_in":{"type":"integer"}},"required":["written","dropped","frames_not_recorded"]}"#.to_string(),
+        ),
+        CLOSED_LOOP_FILTER => (
+            "hitl.ClosedLoopFilter",
+            r#"{"type":"object","properties":{"tick":{"type":"integer"},"t_orbit_s":{"type":"number"},"state":{"type":"array","items":{"type":"number"},"minItems":6,"maxItems":6},"covariance":{"type":"array","items":{"type":"number"},"minItems":36,"maxItems":36},"deviation_lab_m":{"type":"array","items":{"type":"number"},"minItems":3,"maxItems":3}},"required":["tick","state","covariance"]}"#.to_string(),
+        ),
+        CLOSED_LOOP_CORRECTION => (
+            "hitl.ClosedLoopCorrection",
+            r#"{"type":"object","properties":{"tick":{"type":"integer"},"id":{"type":"integer"},"based_on":{"type":"integer"},"correction_lab_m":{"type":"array","items":{"type":"number"}},"clamped":{"type":"boolean"},"ticks":{"type":"integer"},"return_to_plan":{"type":"boolean"},"refused":{"type":"string"}},"required":["tick"]}"#.to_string(),
+        ),
+        CLOSED_LOOP_GATE => (
+            "hitl.ClosedLoopGate",
+            r#"{"type":"object","properties":{"tick":{"type":"integer"},"used":{"type":"boolean"},"reason":{"type":"string","enum":["accepted","lost","late","gated","missing"]},"mahalanobis2":{"type":["number","null"]},"in_a_row":{"type":"integer"},"measured_lab_m":{"type":"array","items":{"type":"number"}}},"required":["tick","used","reason"]}"#.to_string(),
         ),
         _ => return None,
     };

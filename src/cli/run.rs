@@ -114,6 +114,22 @@ pub struct RunArgs {
     /// Allow a non-loopback --live address (the live view then answers anyone on that network).
     #[arg(long)]
     pub allow_remote: bool,
+    /// Close the loop on vision: each pose estimate feeds a relative-navigation filter in the
+    /// plan's frame, and guidance corrects the upcoming setpoints toward the planned relative
+    /// position, inside --corridor-m of the plan and through every preflight rule; needs a plan
+    /// from `hitl plan`, a camera and --perception (docs/closed-loop.md).
+    #[arg(long)]
+    pub closed_loop: bool,
+    /// With --closed-loop: how far (lab metres) a correction may move the camera from where the
+    /// preflighted plan puts it, in (0, 0.05].
+    #[arg(long, default_value_t = crate::closed_loop::corridor::DEFAULT_CORRIDOR_M, value_name = "M",
+          requires = "closed_loop")]
+    pub corridor_m: f64,
+    /// With --closed-loop, a drill of its fallback: stop the perception worker this many seconds
+    /// into the playback; the closed loop must fall back to the plan (recorded) and the run
+    /// complete.
+    #[arg(long, value_name = "S", requires = "closed_loop")]
+    pub drill_perception_stop_s: Option<f64>,
 }
 
 fn parse_live_addr(s: &str) -> Result<SocketAddr, String> {
@@ -228,6 +244,11 @@ pub fn run(args: RunArgs, record: bool) -> u8 {
         stub_start_q: args.stub_start_q,
         plain_progress: args.plain || !std::io::stderr().is_terminal(),
         live: args.live.map(LiveConfig::new),
+        closed_loop: args.closed_loop.then(|| crate::closed_loop::ClosedLoopConfig {
+            corridor_m: args.corridor_m,
+            drill_perception_stop_s: args.drill_perception_stop_s,
+            ..Default::default()
+        }),
     };
     match session::run(request) {
         Ok(report) => {

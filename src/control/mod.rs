@@ -2,6 +2,8 @@
 //! opens a device, names a driver or the stub, or allocates on the tick; the session
 //! (`crate::session`) prepares a run and hands this module its program and devices.
 //!
+//! - [`correction`]: the closed loop's one step in the tick: a prepared, checked joint offset added
+//!   to the planned setpoint (`--closed-loop`, docs/closed-loop.md);
 //! - [`interlocks`]: what each trip means (stop with motion, or hold) and which exit code it ends
 //!   with (the trip itself, a fact, is `crate::telemetry::Trip`);
 //! - [`motion`]: jerk-limited moves planned with Ruckig (the approach and retreat legs, stops);
@@ -14,6 +16,7 @@
 //!
 //! A setpoint is a [`hitl_hal::JointState`] tagged with a [`hitl_hal::Phase`].
 
+pub mod correction;
 pub mod interlocks;
 pub mod motion;
 pub mod planned_move;

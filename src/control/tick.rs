@@ -8,6 +8,7 @@
 //! tick asks every device for its health (hal's `Lifecycle::health`), so a device whose I/O task
 //! failed trips the run within one period even when the tick had nothing to ask it.
 
+use super::correction::CorrectionStage;
 use super::interlocks::{Interlocks, Reaction, Sense};
 use super::stop::{StopPlan, StopRequest, StopRequester};
 use crate::rt::{probe, slot::SlotReader, Periodic, Wake};
@@ -163,6 +164,8 @@ pub struct ControlLoop<'p, A, C, L, I, G, T> {
     device_failed: Option<Device>,
     /// The tick the retreat started at, and whether the playback had settled before it.
     retreat_from: Option<(u64, bool)>,
+    /// `--closed-loop`: the navigator's checked offsets on the playback (open loop: nothing).
+    correction: CorrectionStage,
 }
 
 impl<'p, A, C, L, I, G, T> ControlLoop<'p, A, C, L, I, G, T>
@@ -202,7 +205,14 @@ where
             captures: 0,
             device_failed: None,
             retreat_from: None,
+            correction: CorrectionStage::open_loop(),
         }
+    }
+
+    /// The loop with a closed loop's correction stage (docs/closed-loop.md).
+    pub fn with_correction(mut self, correction: CorrectionStage) -> Self {
+        self.correction = correction;
+        self
     }
 
     /// Run on the calling thread until the program ends or a trip has been handled. The caller
@@ -266,6 +276,7 @@ where
             Ok(next) => next,
             Err(outcome) => return Flow::Done(outcome),
         };
+        let setpoint = self.correction.apply(k, phase, setpoint);
 
         // 4. Send it.
         if let Err(e) = self.devices.arm.servo_joint(&setpoint.q) {

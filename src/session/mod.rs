@@ -1,8 +1,9 @@
 //! A run from start to exit code. [`run`] reads top to bottom as the steps of a run: load and
 //! preflight; start the arm's side (the embedded stub); open and start the devices; start the
 //! capture path (recorder, perception, frame intake); connect the arm, identify it, enable it;
-//! plan the approach and the retreat around the lab's obstacles; play on the real-time thread;
-//! stop the devices; close the capture path and the recording. Everything that allocates or
+//! plan the approach and the retreat around the lab's obstacles; play on the real-time thread
+//! (with `--closed-loop`, beside the closed loop's navigator, `crate::closed_loop`); stop the
+//! devices; close the capture path and the recording. Everything that allocates or
 //! blocks happens here, before or after the loop; the loop itself is [`crate::control::tick`], which
 //! borrows the devices this module owns.
 //!
@@ -27,6 +28,11 @@ use crate::capture::intake::{Intake, IntakeMask, IntakeOutputs, IntakeStats};
 use crate::capture::mask::{MaskDrawer, MaskSource};
 use crate::capture::sink::{IntakeQueues, RunTelemetry};
 use crate::capture::truth::LabFrames;
+use crate::closed_loop::corridor::Corridor;
+use crate::closed_loop::navigator::{Navigator, NavigatorInputs, NavigatorSummary};
+use crate::closed_loop::segment::PlanTicks;
+use crate::closed_loop::{ClosedLoopConfig, PlanFrame};
+use crate::control::correction::{CorrectionQueues, CorrectionStage};
 use crate::control::interlocks::{Interlocks, Thresholds};
 use crate::control::motion::MoveLimits;
 use crate::control::planned_move::PlannedMove;
@@ -45,7 +51,7 @@ use arm_link::{connect_reports, first_report, resolve, spawn_report_reader};
 use devices::{collect_late_frames, start_live, start_recorder, target_scene, TargetScene};
 use hitl_hal::JointState;
 use hitl_hal::{Arm, ArmState, Joints, MonotonicClock};
-use hitl_perception::{backend_from_spec, spawn_worker, BackendSpec, ReregisterPolicy};
+use hitl_perception::{backend_from_spec, spawn_worker, BackendSpec, PoseResult, ReregisterPolicy};
 use hitl_record::{
     ChunkCompression, EventKind, PoseStamped, RecorderHandle, SafetyEventMsg, Telemetry,
 };
@@ -139,6 +145,9 @@ pub struct RunRequest {
     pub plain_progress: bool,
     /// Stream the run to Foxglove (`--live`; needs `record`: the recorder feeds it).
     pub live: Option<hitl_record::LiveConfig>,
+    /// `--closed-loop` (with `--corridor-m`): correct the playback on the pose estimates
+    /// (docs/closed-loop.md); `None`: open loop.
+    pub closed_loop: Option<ClosedLoopConfig>,
 }
 
 /// A run that could not start (nothing moved), or a device that failed before the loop.
@@ -198,6 +207,8 @@ pub struct RunReport {
     pub box_stop: Option<StopConfirmation>,
     /// What the live view did (`--live`).
     pub live: Option<hitl_record::LiveSummary>,
+    /// What the closed loop did (`--closed-loop`).
+    pub closed_loop: Option<NavigatorSummary>,
 }
 
 impl RunReport {
@@ -267,6 +278,9 @@ impl RunReport {
                 l.addr, l.viewers, l.sent, l.images, l.dropped
             ));
         }
+        if let Some(c) = &self.closed_loop {
+            s.push_str(&format!("\n{}", c.describe()));
+        }
         for fault in &self.device_faults {
             s.push_str(&format!("\ndevice fault: {fault}"));
         }
@@ -295,6 +309,7 @@ pub fn run(req: RunRequest) -> Result<RunReport, RunError> {
     let (traj, table) = if req.park { park_target(&req)? } else { prepare(&req)? };
     let scene = target_scene(&req, &traj)?;
     check_perception_choice(&req)?;
+    let plan_frame = closed_loop_frame(&req, &traj)?;
     let clock = MonotonicClock::new();
     let runtime = io_runtime()?;
 
@@ -333,8 +348,17 @@ pub fn run(req: RunRequest) -> Result<RunReport, RunError> {
     }
 
     // 7. Play it on the real-time thread (the loop borrows the arm and the devices).
-    let played =
-        play(&req, &program, &table, &mut link, &mut devices, &capture, operator_stop, clock)?;
+    let played = play(
+        &req,
+        &program,
+        &table,
+        &mut link,
+        &mut devices,
+        &capture,
+        operator_stop,
+        clock,
+        plan_frame,
+    )?;
 
     // 7b. A tripped run: the box's stop repeated until a report shows it (off the loop thread).
     let box_stop = arm_link::confirm_stop(
@@ -377,6 +401,24 @@ fn check_perception_choice(req: &RunRequest) -> Result<(), RunError> {
         ));
     }
     Ok(())
+}
+
+/// `--closed-loop`: the plan's relative frame (a planned trajectory), an estimator and a camera to
+/// feed it; checked before anything opens (exit 2 otherwise).
+fn closed_loop_frame(req: &RunRequest, traj: &Trajectory) -> Result<Option<PlanFrame>, RunError> {
+    let Some(cfg) = &req.closed_loop else { return Ok(None) };
+    if req.park {
+        return Ok(None);
+    }
+    if req.perception == BackendSpec::None || req.camera == CameraSpec::None {
+        return Err(RunError::BadInput(
+            "--closed-loop needs a camera and a pose estimator (--camera sim|orbbec and \
+             --perception icp|onnx:MODEL|socket:PATH): it corrects the plan on what they see"
+                .into(),
+        ));
+    }
+    Corridor::new(cfg.corridor_m).map_err(RunError::BadInput)?;
+    PlanFrame::from_plan(traj, req.speed_scale).map(Some).map_err(RunError::BadInput)
 }
 
 /// The run's one tokio runtime, kept until the run returns: serial drivers' I/O tasks and the
@@ -499,6 +541,8 @@ struct CapturePath {
     record: Option<Telemetry>,
     perception: Option<hitl_perception::WorkerHandle>,
     estimates: Option<tokio::task::JoinHandle<u64>>,
+    /// `--closed-loop`: every estimate, for the navigator (taken when the loop starts).
+    navigation: std::sync::Mutex<Option<crossbeam::channel::Receiver<PoseResult>>>,
     intake: Intake,
     queues: Arc<IntakeQueues>,
     live: Option<hitl_record::LiveServer>,
@@ -525,6 +569,13 @@ impl CapturePath {
             Some((h, t)) => (Some(h), Some(t)),
             None => (None, None),
         };
+        let (tee, navigation) = match req.closed_loop {
+            Some(_) => {
+                let (tx, rx) = crossbeam::channel::bounded(64);
+                (Some(tx), Some(rx))
+            }
+            None => (None, None),
+        };
         let (perception, estimates) = match &req.perception {
             BackendSpec::None => (None, None),
             spec => {
@@ -543,6 +594,10 @@ impl CapturePath {
                         let forward = runtime.spawn(async move {
                             let mut n = 0u64;
                             while let Some(r) = results.recv().await {
+                                if let Some(tee) = &tee {
+                                    // Never waits: a navigator that fell behind misses it.
+                                    let _ = tee.try_send(r.clone());
+                                }
                                 if let (Ok(est), Some(sink)) = (&r.estimate, &sink) {
                                     if let Some(pose) = est.pose {
                                         sink.push_pose_estimate(&PoseStamped {
@@ -582,7 +637,8 @@ impl CapturePath {
             mask,
         )
         .map_err(|e| RunError::Device(format!("capture intake thread: {e}")))?;
-        Ok(Self { recorder, record, perception, estimates, intake, queues, live })
+        let navigation = std::sync::Mutex::new(navigation);
+        Ok(Self { recorder, record, perception, estimates, navigation, intake, queues, live })
     }
 
     /// Drain the intake, let perception finish, write the run's last event and close the file.
@@ -783,6 +839,7 @@ struct Played {
     rt: rt::RtReport,
     status: Arc<LoopStatus>,
     captures: u64,
+    closed_loop: Option<NavigatorSummary>,
 }
 
 /// Play `program` on the real-time thread, the loop borrowing the arm and the devices; progress
@@ -797,6 +854,7 @@ fn play(
     capture: &CapturePath,
     operator_stop: Arc<AtomicBool>,
     clock: MonotonicClock,
+    plan_frame: Option<PlanFrame>,
 ) -> Result<Played, RunError> {
     let health = Health {
         operator_stop,
@@ -826,6 +884,8 @@ fn play(
         clock,
     };
     let interlocks = Interlocks::new(Thresholds::from_lab(&req.lab));
+    let (correction, navigator) =
+        start_navigator(req, program, table, &link.lab, capture, &status, clock, plan_frame)?;
     let rt_options = req.rt;
     let rate = table.rate_hz;
     let start_q = link.first.q;
@@ -843,7 +903,8 @@ fn play(
                     trigger: &mut devices.trigger,
                 };
                 let control =
-                    ControlLoop::new(program, loop_devices, io, interlocks, rate, &start_q);
+                    ControlLoop::new(program, loop_devices, io, interlocks, rate, &start_q)
+                        .with_correction(correction);
                 let outcome = control.run(rt_options.spin);
                 let _ = arm.flush_servo_replies();
                 (outcome, rt_report)
@@ -853,8 +914,89 @@ fn play(
         rt_thread.join().map_err(|_| RunError::Device("the real-time thread panicked".into()))
     })?;
     drop(planner);
+    let closed_loop = navigator.map(|n| {
+        let summary = n.finish();
+        if let Some(t) = &capture.record {
+            t.push_metadata("closed_loop", closed_loop_metadata(req, &summary));
+        }
+        summary
+    });
     let captures = status.captures.load(Ordering::Acquire);
-    Ok(Played { outcome, rt: rt_report, status, captures })
+    Ok(Played { outcome, rt: rt_report, status, captures, closed_loop })
+}
+
+/// `--closed-loop`: the tick's correction stage and the navigator that feeds it (open loop: a
+/// stage that does nothing, no navigator).
+#[allow(clippy::too_many_arguments)]
+fn start_navigator(
+    req: &RunRequest,
+    program: &Program,
+    table: &SetpointTable,
+    lab: &LabConfig,
+    capture: &CapturePath,
+    status: &Arc<LoopStatus>,
+    clock: MonotonicClock,
+    plan_frame: Option<PlanFrame>,
+) -> Result<(CorrectionStage, Option<Navigator>), RunError> {
+    let (Some(config), Some(frame)) = (req.closed_loop, plan_frame) else {
+        return Ok((CorrectionStage::open_loop(), None));
+    };
+    let results = capture.navigation.lock().ok().and_then(|mut r| r.take()).ok_or_else(|| {
+        RunError::Device("--closed-loop: no pose estimates to navigate on".into())
+    })?;
+    let first_tick = program.approach.len() as u64;
+    let capture_ticks = program
+        .capture
+        .iter()
+        .enumerate()
+        .filter(|(_, c)| **c)
+        .map(|(i, _)| first_tick + i as u64)
+        .collect();
+    let queues = CorrectionQueues::new(4);
+    let navigator = Navigator::spawn(NavigatorInputs {
+        frame,
+        config,
+        lab: lab.clone(),
+        plan: PlanTicks { first_tick, playback: program.playback.clone() },
+        capture_ticks,
+        dt: table.dt,
+        results,
+        queues: queues.clone(),
+        status: Arc::clone(status),
+        record: capture.record.clone(),
+        clock,
+        perception: capture.perception.clone(),
+    })
+    .map_err(|e| RunError::Device(format!("closed-loop navigator thread: {e}")))?;
+    Ok((CorrectionStage::closed_loop(queues), Some(navigator)))
+}
+
+/// The run's `closed_loop` metadata record: the settings and what the closed loop did.
+fn closed_loop_metadata(
+    req: &RunRequest,
+    s: &NavigatorSummary,
+) -> std::collections::BTreeMap<String, String> {
+    let mut m = std::collections::BTreeMap::new();
+    if let Some(c) = &req.closed_loop {
+        m.insert("corridor_m".into(), c.corridor_m.to_string());
+        m.insert("fallback_after".into(), c.fallback_after.to_string());
+        m.insert("max_age_s".into(), c.max_age_s.to_string());
+        m.insert("hold_s".into(), c.hold_s.to_string());
+    }
+    for (k, v) in [
+        ("accepted", s.accepted),
+        ("gated", s.gated),
+        ("lost", s.lost),
+        ("late", s.late),
+        ("missing", s.missing),
+        ("segments", s.segments),
+        ("refused", s.refused),
+    ] {
+        m.insert(k.into(), v.to_string());
+    }
+    m.insert("max_correction_m".into(), s.max_correction_m.to_string());
+    m.insert("fallback".into(), s.fallback.clone().unwrap_or_default());
+    m
 }
 
 /// After the loop: hand the frames still on their way to the intake, stop every device (a last
@@ -909,5 +1051,6 @@ fn report(
         device_faults,
         box_stop: None,
         live: closed.live,
+        closed_loop: played.closed_loop,
     }
 }
