@@ -131,7 +131,6 @@ impl MonoTracker {
     fn lift(&mut self, feats: &Features, pose: &Pose, k: &Intrinsics) -> Keyframe {
         self.lifter.draw(pose, k, 0, &mut self.drawn);
         let inv = pose.inverse();
-        let w = k.width as usize;
         let mut key = Keyframe { descriptors: Vec::new(), body: Vec::new(), pose: *pose };
         for (d, &(u, v)) in feats.descriptors.iter().zip(&feats.pixels) {
             let Some(z) = self.surface_under(u as usize, v as usize, k) else { continue };
