@@ -69,7 +69,7 @@ pub struct MonoConfig {
 impl Default for MonoConfig {
     fn default() -> Self {
         MonoConfig {
-            dark_level: 20,
+            dark_level: 8,
             min_lit_px: 40,
             fast_threshold: 12,
             max_features: 400,

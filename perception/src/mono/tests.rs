@@ -67,9 +67,10 @@ fn is_lost_in_the_dark() {
     let mesh = target();
     let (k, poses) = views(1);
     let mut frame = render(&mesh, &poses[0], &k, 0);
-    // A sixteenth of the light: the flat-shaded faces (40-240) fall to 2-15, under the dark level.
+    // A thirty-second of the light: the flat-shaded faces (40-240) fall to 1-7, under the dark
+    // level.
     for c in &mut frame.color {
-        *c /= 16;
+        *c /= 32;
     }
     let mut t = MonoTracker::new(&mesh, MonoConfig::default()).expect("tracker");
     let e = t.estimate(&frame).expect("estimate");
