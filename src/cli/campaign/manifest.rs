@@ -673,6 +673,11 @@ mod tests {
         assert!(e("[run]\nrange_m = -5\n").contains("`range_m`"));
         assert!(e("[run]\nmesh_faces = 2\n").contains("`mesh_faces`"));
         assert!(e("[run]\nsun_phase_deg = \"a:b\"\n").contains("`sun_phase_deg`"));
+        // A phase angle is 0-180 deg, FROM below TO.
+        for bad in ["\"170:190\"", "\"36:0\"", "\"-1:36\"", "36"] {
+            let m = format!("[run]\nphase_angle_deg = {bad}\n");
+            assert!(e(&m).contains("`phase_angle_deg`"), "{bad}");
+        }
         assert!(e("[run]\nrange_m = 5\n[matrix]\nrange_m = [5]\n").contains("both"));
         assert!(e("[matrix]\nconfig = [\"a.toml\"]\n").contains("`config`"));
         assert!(e("[extra]\n").contains("`extra`"));
@@ -714,6 +719,7 @@ mod tests {
                 .map(|i| match def.kind {
                     Kind::Text => format!("\"v{i}\""),
                     Kind::Window => format!("\"{i}:{}\"", i + 10),
+                    Kind::PhaseRegion => format!("\"{i}:{}\"", i + 100),
                     _ => format!("{}", i + 4),
                 })
                 .collect();
