@@ -25,7 +25,7 @@ $HITL run "$OUT/flyaround-10m.npz" --record "$OUT/run.mcap" --camera sim --camer
 
 echo
 echo "== hitl report"
-$HITL report "$OUT/run.mcap" --out "$OUT/report" --contact-zoom 4
+$HITL report "$OUT/run.mcap" --out "$OUT/report" --contact-zoom 1.5
 
 echo
 echo "== hitl eval (the paper's metrics: e_t in real metres, e_r in degrees)"

@@ -163,8 +163,8 @@ fn the_presets_load_with_their_case_counts() {
         ("rq2-mesh-ci.toml", 2),
         ("rq3-range.toml", 24),
         ("rq3-range-ci.toml", 2),
-        ("rq4-illumination.toml", 15),
-        ("rq4-illumination-ci.toml", 2),
+        ("rq4-illumination.toml", 30),
+        ("rq4-illumination-ci.toml", 4),
         ("sitl-table.toml", 24),
     ];
     let dir = Path::new(env!("CARGO_MANIFEST_DIR")).join("campaigns");
@@ -191,6 +191,39 @@ fn the_presets_load_with_their_case_counts() {
     // The illumination study plays where the Sun moves.
     let rq4 = std::fs::read_to_string(dir.join("rq4-illumination.toml")).expect("rq4");
     assert!(rq4.contains("scene_kind = \"orbit\""));
+}
+
+/// RQ4 plays the paper's five phase-angle regions, each with both estimators: `campaign list
+/// --json` gives every case's planned phase angles, and each region's cases stay inside it.
+#[test]
+fn the_rq4_preset_covers_the_five_phase_regions() {
+    let dir = Path::new(env!("CARGO_MANIFEST_DIR")).join("campaigns");
+    let o = hitl(&[
+        "campaign",
+        "list",
+        "--json",
+        dir.join("rq4-illumination.toml").to_str().expect("utf-8"),
+    ]);
+    assert_eq!(o.status.code(), Some(0), "{}", text(&o));
+    let v: serde_json::Value = serde_json::from_slice(&o.stdout).expect("one JSON object");
+    let cases = v["cases"].as_array().expect("cases");
+    let regions = [(0.0, 36.0), (36.0, 72.0), (72.0, 108.0), (108.0, 144.0), (144.0, 180.0)];
+    for (from, to) in regions {
+        let inside: Vec<&serde_json::Value> = cases
+            .iter()
+            .filter(|c| c["params"]["phase_angle_deg"] == format!("{from}:{to}"))
+            .collect();
+        assert_eq!(inside.len(), 6, "{from}:{to}: three targets times two estimators");
+        for c in inside {
+            let lo = c["phase_angle_deg"][0].as_f64().expect("phase range");
+            let hi = c["phase_angle_deg"][1].as_f64().expect("phase range");
+            assert!(from <= lo && lo < hi && hi <= to, "{from}:{to}: the arc sees {lo}-{hi}");
+            assert_eq!(c["sun_eci"].as_array().map(Vec::len), Some(3), "{c}");
+        }
+    }
+    for p in ["icp", "mono"] {
+        assert_eq!(cases.iter().filter(|c| c["params"]["perception"] == p).count(), 15, "{p}");
+    }
 }
 
 #[test]

@@ -14,6 +14,8 @@ use std::path::PathBuf;
 pub enum BackendSpec {
     None,
     Icp,
+    /// The monocular baseline ([`crate::mono`]): colour and mask, no depth.
+    Mono,
     Onnx(PathBuf),
     Socket(PathBuf),
 }
@@ -24,6 +26,7 @@ impl std::str::FromStr for BackendSpec {
         match s {
             "none" => Ok(BackendSpec::None),
             "icp" => Ok(BackendSpec::Icp),
+            "mono" => Ok(BackendSpec::Mono),
             _ => {
                 if let Some(p) = s.strip_prefix("onnx:").filter(|p| !p.is_empty()) {
                     Ok(BackendSpec::Onnx(PathBuf::from(p)))
@@ -38,7 +41,7 @@ impl std::str::FromStr for BackendSpec {
 }
 
 /// Builds the backend a spec names. `mesh` is the target model at the scale the camera sees it
-/// (lab metres); the ICP tracker, mask-output ONNX models and the external estimator
+/// (lab metres); the ICP tracker, the monocular baseline, mask-output ONNX models and the external estimator
 /// (which receives it in its handshake) need it. `None` gives `Ok(None)`.
 pub fn backend_from_spec(
     spec: &BackendSpec,
@@ -47,6 +50,9 @@ pub fn backend_from_spec(
     Ok(match spec {
         BackendSpec::None => None,
         BackendSpec::Icp => Some(Box::new(IcpTracker::new(mesh, IcpConfig::default())?)),
+        BackendSpec::Mono => {
+            Some(Box::new(crate::mono::MonoTracker::new(mesh, crate::mono::MonoConfig::default())?))
+        }
         BackendSpec::Onnx(path) => {
             Some(Box::new(crate::onnx::OnnxEstimator::load(path, Some(mesh))?))
         }

@@ -23,7 +23,7 @@ pub enum PerceptionError {
     OnnxRuntime(String),
     /// A backend name the CLI does not know.
     #[error(
-        "unknown perception backend {0:?} (expected icp, onnx:MODEL.onnx, socket:PATH or none)"
+        "unknown perception backend {0:?} (expected icp, mono, onnx:MODEL.onnx, socket:PATH or none)"
     )]
     UnknownBackend(String),
     /// Bad numbers handed to a metric or solver (NaN, not a rotation, too few points).

@@ -1,7 +1,8 @@
 //! `hitl-perception`: the pose-estimation side of the testbed.
 //!
 //! Every captured frame goes to an asynchronous [`worker`] that runs one [`PoseEstimator`]
-//! backend (the built-in model-based [`icp`] tracker, or an [`onnx`] model) and emits a
+//! backend (the built-in model-based [`icp`] tracker, the [`mono`] colour baseline, or an
+//! [`onnx`] model) and emits a
 //! target-in-camera pose stamped with the frame's timestamp. [`metrics`] scores estimates against
 //! ground truth exactly as the DreamSat-Bench paper does; [`normalize`] is the paper's depth
 //! normalisation; [`models`] holds the target meshes (procedural spacecraft and the user's
@@ -16,6 +17,7 @@ pub mod frame;
 pub mod icp;
 pub mod metrics;
 pub mod models;
+pub mod mono;
 pub mod normalize;
 pub mod onnx;
 pub mod pnp;

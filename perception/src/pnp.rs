@@ -89,6 +89,28 @@ fn dlt(body: &[Vector3<f64>], rays: &[(f64, f64)]) -> Result<Pose, PerceptionErr
     Ok(from_rt(&r, &t_body))
 }
 
+/// Pose of the body whose points `body` appear at `pixels`, by Gauss-Newton on the reprojection
+/// error from `init` (no linear first guess): for few points (4 or more) near a known pose, as a
+/// RANSAC hypothesis from a tracked pose is. Points behind the camera at `init` make no sense of
+/// the cost; the caller checks the answer.
+pub fn refine_pnp(
+    body: &[Vector3<f64>],
+    pixels: &[(f64, f64)],
+    k: &Intrinsics,
+    init: &Pose,
+) -> Result<Pose, PerceptionError> {
+    if body.len() != pixels.len() || body.len() < 3 {
+        return Err(PerceptionError::BadInput(format!(
+            "PnP refinement: {} 3D points, {} pixels (at least 3 pairs)",
+            body.len(),
+            pixels.len()
+        )));
+    }
+    let rays: Vec<(f64, f64)> =
+        pixels.iter().map(|(u, v)| ((u - k.cx) / k.fx, (v - k.cy) / k.fy)).collect();
+    Ok(refine(body, &rays, *init))
+}
+
 fn residuals(body: &[Vector3<f64>], rays: &[(f64, f64)], t: &Pose) -> Vec<f64> {
     let r = t.rotation.to_rotation_matrix();
     let tr = t.translation.vector;

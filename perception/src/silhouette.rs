@@ -169,6 +169,13 @@ impl SilhouetteRenderer {
         Drawn { silhouette_px, mask_px }
     }
 
+    /// The drawn surface's depth (metres along the camera axis) at pixel `idx`, valid after a
+    /// [`Self::draw`] with margin 0 for a pixel its mask marks [`TARGET`] (elsewhere it may be
+    /// left from an earlier drawing).
+    pub fn surface_depth(&self, idx: usize) -> Option<f32> {
+        self.depth.get(idx).copied().filter(|d| d.is_finite())
+    }
+
     /// Grows `mask` by a disc of `radius` pixels: every pixel within `radius` of a target pixel
     /// becomes target (stamped from the silhouette's boundary pixels, all inside `bx`). Returns
     /// the target pixels after.

@@ -26,8 +26,9 @@ pub struct EvalArgs {
     /// Print one JSON object (frames, scale, mean/median/std of e_t and e_r, failures, ...).
     #[arg(long)]
     pub json: bool,
-    /// Re-run a backend offline over the recorded frames: icp, onnx:MODEL.onnx, or socket:PATH
-    /// (an external estimator listening on a unix socket, docs/perception.md).
+    /// Re-run a backend offline over the recorded frames: icp, mono (the monocular baseline:
+    /// colour and mask, no depth), onnx:MODEL.onnx, or socket:PATH (an external estimator
+    /// listening on a unix socket, docs/perception.md).
     #[arg(long)]
     pub backend: Option<String>,
     /// Target model for --backend: a built-in name (asymmetric, one-plane, two-planes) or an

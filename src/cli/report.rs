@@ -29,8 +29,9 @@ pub struct ReportArgs {
     #[arg(long, default_value_t = 480, value_parser = clap::value_parser!(u32).range(16..))]
     pub contact_width: u32,
     /// Show each contact-sheet frame cropped around the target: its ground-truth mask's box grown
-    /// Z times (at least 1), at the frame's aspect ratio. Without it, whole frames (at a
-    /// fly-around's range a wide camera shows the target a few dozen pixels wide).
+    /// Z times (at least 1), at the frame's aspect ratio, drawn the sheet's full width (so the
+    /// target spans about 1/Z of it; 1.5 lets it fill most of the tile). Without it, whole frames
+    /// (at a fly-around's range a wide camera shows the target a few dozen pixels wide).
     #[arg(long, value_name = "Z")]
     pub contact_zoom: Option<f64>,
     /// The target's symmetry for the report's symmetry-aware pose metrics, as `hitl eval
@@ -60,6 +61,21 @@ fn pose_metrics(
     let mut v = m.to_json();
     if let Some(o) = v.as_object_mut() {
         o.insert("symmetry_source".into(), serde_json::json!(source));
+        // Per frame, for the report's plot of the paper's error over the run.
+        let rows: Vec<serde_json::Value> = m
+            .per_frame
+            .iter()
+            .map(|f| {
+                serde_json::json!({
+                    "t_ns": f.timestamp_ns,
+                    "et_m": f.et_m,
+                    "er_deg": f.er_deg,
+                    "et_sym_m": f.et_sym_m,
+                    "er_sym_deg": f.er_sym_deg,
+                })
+            })
+            .collect();
+        o.insert("per_frame".into(), serde_json::Value::Array(rows));
     }
     Ok(v)
 }

@@ -47,9 +47,10 @@ pub struct RunArgs {
     /// measures each.
     #[arg(long, default_value_t = RecorderConfig::default().compression, value_name = "NAME")]
     pub record_compression: ChunkCompression,
-    /// Pose estimation on captured frames: icp, onnx:MODEL, socket:PATH (an external estimator
-    /// listening on a unix socket, docs/perception.md), or none.
-    #[arg(long, default_value = "none", value_name = "icp|onnx:MODEL|socket:PATH|none")]
+    /// Pose estimation on captured frames: icp, mono (the monocular baseline: colour and mask,
+    /// no depth), onnx:MODEL, socket:PATH (an external estimator listening on a unix socket,
+    /// docs/perception.md), or none.
+    #[arg(long, default_value = "none", value_name = "icp|mono|onnx:MODEL|socket:PATH|none")]
     pub perception: BackendSpec,
     #[command(flatten)]
     pub reregister: ReregisterArgs,

@@ -133,6 +133,7 @@ fn perception_name(spec: &BackendSpec) -> String {
     match spec {
         BackendSpec::None => "none".into(),
         BackendSpec::Icp => "icp".into(),
+        BackendSpec::Mono => "mono".into(),
         BackendSpec::Onnx(p) => format!("onnx:{}", p.display()),
         BackendSpec::Socket(p) => format!("socket:{}", p.display()),
     }

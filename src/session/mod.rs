@@ -396,7 +396,7 @@ fn check_perception_choice(req: &RunRequest) -> Result<(), RunError> {
     if req.perception == BackendSpec::None && req.reregister != ReregisterPolicy::default() {
         return Err(RunError::BadInput(
             "--reregister-every and --reregister-residual-m need a pose estimator \
-             (--perception icp|onnx:MODEL|socket:PATH)"
+             (--perception icp|mono|onnx:MODEL|socket:PATH)"
                 .into(),
         ));
     }

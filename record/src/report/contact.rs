@@ -297,11 +297,34 @@ fn shrink_u8(src: &[u8], channels: usize, (w, h): (u32, u32), (ow, oh): (u32, u3
         .collect()
 }
 
-/// Shrink a silhouette: an output pixel is inside when at least half its source pixels are.
-fn shrink_silhouette(s: &Silhouette, ow: u32, oh: u32) -> Silhouette {
+/// Resize `channels`-channel u8 pixels from `w` x `h` to `ow` x `oh`: the box filter when
+/// shrinking, else each output pixel takes the source pixel its centre falls in (a zoomed crop
+/// enlarged to the sheet's width shows its pixels as blocks, not smoothed).
+fn resize_u8(src: &[u8], channels: usize, (w, h): (u32, u32), (ow, oh): (u32, u32)) -> Vec<u8> {
+    if ow <= w && oh <= h {
+        return shrink_u8(src, channels, (w, h), (ow, oh));
+    }
+    let at = |o: u32, from: u32, to: u32| {
+        (((2 * u64::from(o) + 1) * u64::from(from)) / (2 * u64::from(to))).min(u64::from(from) - 1)
+            as usize
+    };
+    let mut out = Vec::with_capacity(ow as usize * oh as usize * channels);
+    for y in 0..oh {
+        let sy = at(y, h, oh);
+        for x in 0..ow {
+            let s = (sy * w as usize + at(x, w, ow)) * channels;
+            out.extend_from_slice(&src[s..s + channels]);
+        }
+    }
+    out
+}
+
+/// Resize a silhouette as [`resize_u8`] does (shrunk: inside when at least half its source
+/// pixels are).
+fn resize_silhouette(s: &Silhouette, ow: u32, oh: u32) -> Silhouette {
     let bytes: Vec<u8> = s.inside.iter().map(|&v| if v { 255 } else { 0 }).collect();
-    let small = shrink_u8(&bytes, 1, (s.width, s.height), (ow, oh));
-    Silhouette { width: ow, height: oh, inside: small.iter().map(|&v| v >= 128).collect() }
+    let out = resize_u8(&bytes, 1, (s.width, s.height), (ow, oh));
+    Silhouette { width: ow, height: oh, inside: out.iter().map(|&v| v >= 128).collect() }
 }
 
 /// rgb8 pixels of a colour image (rgb8, bgr8 or mono8).
@@ -381,7 +404,63 @@ pub fn write_contact_sheet(
     opts: &ContactOptions<'_>,
 ) -> Result<(ContactSheet, Vec<PathBuf>), ReportError> {
     let mut sheet = ContactSheet::default();
-    // First pass: the captures and their intrinsics, from the per-frame calibration.
+    let captures = read_captures(mcap, &mut sheet)?;
+    if captures.is_empty() {
+        sheet.notes.push(
+            "this recording holds no camera frames (a run without a camera, or one stopped before \
+             its first capture): no contact sheet"
+                .to_string(),
+        );
+        return Ok((sheet, Vec::new()));
+    }
+    let chosen = spread(captures.len(), opts.frames);
+    let mut pixels = read_pixels(mcap, &captures, &chosen, &mut sheet)?;
+
+    let empty = BTreeMap::new();
+    let run = rec.metadata.get(topics::META_RUN).unwrap_or(&empty);
+    let model = match opts.model {
+        Some(source) => match source(run) {
+            Ok(m) => Some(m),
+            Err(e) => {
+                sheet.notes.push(format!("no model silhouettes (target model: {e})"));
+                None
+            }
+        },
+        None => {
+            sheet.notes.push("no target model given: no model silhouettes".to_string());
+            None
+        }
+    };
+    let out_dir = dir.join(CONTACT_DIR);
+    std::fs::create_dir_all(&out_dir).map_err(super::io(&out_dir))?;
+    clear_old_pngs(&out_dir)?;
+    let ctx = Sheet {
+        rec,
+        opts,
+        model,
+        scale: run.get("scale").and_then(|s| s.parse::<f64>().ok()).filter(|s| *s > 0.0),
+        origin: match t0(rec) {
+            0 => captures[0].0,
+            t => t,
+        },
+        out_dir,
+    };
+    let mut files = Vec::new();
+    for &i in &chosen {
+        let (t, k) = captures[i];
+        let px = pixels.remove(&t).unwrap_or_default();
+        let (frame, path) = ctx.draw(i, t, k, px)?;
+        files.push(path);
+        sheet.frames.push(frame);
+    }
+    Ok((sheet, files))
+}
+
+/// The captures (stamp, intrinsics) in time order, from the per-frame calibration.
+fn read_captures(
+    mcap: &Path,
+    sheet: &mut ContactSheet,
+) -> Result<Vec<(u64, Intrinsics)>, ReportError> {
     let mut captures: Vec<(u64, Intrinsics)> = Vec::new();
     let mut bad_calibration = 0usize;
     visit(
@@ -403,17 +482,16 @@ pub fn write_contact_sheet(
     if bad_calibration > 0 {
         sheet.notes.push(format!("{bad_calibration} unreadable /camera/calibration messages"));
     }
-    if captures.is_empty() {
-        sheet.notes.push(
-            "this recording holds no camera frames (a run without a camera, or one stopped before \
-             its first capture): no contact sheet"
-                .to_string(),
-        );
-        return Ok((sheet, Vec::new()));
-    }
+    Ok(captures)
+}
 
-    // Second pass: the pixels of the chosen captures only.
-    let chosen = spread(captures.len(), opts.frames);
+/// The images of the `chosen` captures only, by capture stamp.
+fn read_pixels(
+    mcap: &Path,
+    captures: &[(u64, Intrinsics)],
+    chosen: &[usize],
+    sheet: &mut ContactSheet,
+) -> Result<HashMap<u64, Pixels>, ReportError> {
     let mut pixels: HashMap<u64, Pixels> =
         chosen.iter().map(|&i| (captures[i].0, Pixels::default())).collect();
     let mut bad_images = 0usize;
@@ -441,35 +519,30 @@ pub fn write_contact_sheet(
     if bad_images > 0 {
         sheet.notes.push(format!("{bad_images} images of the sheet's captures could not be read"));
     }
+    Ok(pixels)
+}
 
-    let empty = BTreeMap::new();
-    let run = rec.metadata.get(topics::META_RUN).unwrap_or(&empty);
-    let model = match opts.model {
-        Some(source) => match source(run) {
-            Ok(m) => Some(m),
-            Err(e) => {
-                sheet.notes.push(format!("no model silhouettes (target model: {e})"));
-                None
-            }
-        },
-        None => {
-            sheet.notes.push("no target model given: no model silhouettes".to_string());
-            None
-        }
-    };
-    let scale = run.get("scale").and_then(|s| s.parse::<f64>().ok()).filter(|s| *s > 0.0);
-    let origin = match t0(rec) {
-        0 => captures[0].0,
-        t => t,
-    };
+/// What every tile of a sheet shares.
+struct Sheet<'a> {
+    rec: &'a Recording,
+    opts: &'a ContactOptions<'a>,
+    model: Option<TargetMesh>,
+    /// The run's scale (lab m per real m), when it recorded one.
+    scale: Option<f64>,
+    /// The run's start, for the tiles' times.
+    origin: u64,
+    out_dir: PathBuf,
+}
 
-    let out_dir = dir.join(CONTACT_DIR);
-    std::fs::create_dir_all(&out_dir).map_err(super::io(&out_dir))?;
-    clear_old_pngs(&out_dir)?;
-    let mut files = Vec::new();
-    for &i in &chosen {
-        let (t, k) = captures[i];
-        let px = pixels.remove(&t).unwrap_or_default();
+impl Sheet<'_> {
+    /// Draws capture `i` (stamp `t`, intrinsics `k`) into its PNG and says what is on it.
+    fn draw(
+        &self,
+        i: usize,
+        t: u64,
+        k: Intrinsics,
+        px: Pixels,
+    ) -> Result<(ContactFrame, PathBuf), ReportError> {
         let (fw, fh) = (k.width, k.height);
         let sized = |img: Option<fg::RawImage>| img.filter(|m| (m.width, m.height) == (fw, fh));
         let (color, depth, mask) = (sized(px.color), sized(px.depth), sized(px.mask));
@@ -481,27 +554,29 @@ pub fn write_contact_sheet(
         let mask = mask
             .filter(|m| m.encoding == "mono8")
             .and_then(|m| Silhouette::from_mono8(fw, fh, &packed_rows(&m, 1)?));
-        // The window shown: the whole frame, or (zoom) a crop around the target's mask.
-        let window = opts
-            .zoom
-            .and_then(|z| mask.as_ref().and_then(|m| zoom_window(m, z)))
-            .unwrap_or((0, 0, fw, fh));
-        let (background, mask, k) = crop(&background, mask, &k, window);
+        // The window shown: the whole frame, or (zoom) a crop around the target's mask, which
+        // is then drawn the sheet's full width (enlarged if it is smaller).
+        let window = self.opts.zoom.and_then(|z| mask.as_ref().and_then(|m| zoom_window(m, z)));
+        let (background, mask, k) = crop(&background, mask, &k, window.unwrap_or((0, 0, fw, fh)));
         let (w, h) = (k.width, k.height);
-        let (ow, oh) = sheet_size(w, h, opts.max_width);
-        let mut rgb = shrink_u8(&background, 3, (w, h), (ow, oh));
+        let (ow, oh) = match window {
+            Some(_) => tile_size(w, h, self.opts.max_width),
+            None => sheet_size(w, h, self.opts.max_width),
+        };
+        let mut rgb = resize_u8(&background, 3, (w, h), (ow, oh));
         let sk = k.scaled(ow, oh);
-        let gt_pose = pose_at(&rec.pose_gt, t);
-        let est_pose = pose_at(&rec.pose_estimate, t);
-        let mask = mask.map(|s| shrink_silhouette(&s, ow, oh));
-        let model_gt = model.as_ref().zip(gt_pose).map(|(m, p)| rasterize(m, &p, &sk));
+        let gt_pose = pose_at(&self.rec.pose_gt, t);
+        let est_pose = pose_at(&self.rec.pose_estimate, t);
+        let mask = mask.map(|s| resize_silhouette(&s, ow, oh));
+        let model = self.model.as_ref();
+        let model_gt = model.zip(gt_pose).map(|(m, p)| rasterize(m, &p, &sk));
         let model_mask_iou = mask.as_ref().zip(model_gt.as_ref()).and_then(|(a, b)| a.iou(b));
         let (gt, source) = match (mask, model_gt) {
             (Some(m), _) => (Some(m), Some(GroundTruthSource::Mask)),
             (None, Some(m)) => (Some(m), Some(GroundTruthSource::Model)),
             (None, None) => (None, None),
         };
-        let est = model.as_ref().zip(est_pose).map(|(m, p)| rasterize(m, &p, &sk));
+        let est = model.zip(est_pose).map(|(m, p)| rasterize(m, &p, &sk));
         if let Some(g) = &gt {
             paint(&mut rgb, &g.outline(), GROUND_TRUTH_COLOUR);
         }
@@ -509,28 +584,36 @@ pub fn write_contact_sheet(
             paint(&mut rgb, &e.outline(), ESTIMATE_COLOUR);
         }
         let name = format!("{i:03}.png");
-        let path = out_dir.join(&name);
+        let path = self.out_dir.join(&name);
         write_png(&path, ow, oh, &rgb)
             .map_err(|e| ReportError::Io { path: path.display().to_string(), source: e })?;
-        files.push(path);
         let errors = est_pose.zip(gt_pose).map(|(e, g)| pose::difference(&e, &g));
-        sheet.frames.push(ContactFrame {
+        let frame = ContactFrame {
             capture: i,
             capture_ns: t,
-            t_s: secs(t, origin),
+            t_s: secs(t, self.origin),
             file: format!("{CONTACT_DIR}/{name}"),
             width: ow,
             height: oh,
             ground_truth: source,
             estimate: est.is_some(),
             et_lab_mm: errors.map(|e| e.0 * 1e3),
-            et_m: errors.zip(scale).map(|(e, s)| e.0 / s),
+            et_m: errors.zip(self.scale).map(|(e, s)| e.0 / s),
             er_deg: errors.map(|e| e.1.to_degrees()),
             estimate_iou: est.as_ref().zip(gt.as_ref()).and_then(|(a, b)| a.iou(b)),
             model_mask_iou,
-        });
+        };
+        Ok((frame, path))
     }
-    Ok((sheet, files))
+}
+
+/// A zoomed tile's size: the crop drawn `max_width` wide, aspect kept (enlarged or shrunk).
+fn tile_size(width: u32, height: u32, max_width: u32) -> (u32, u32) {
+    if width == 0 || max_width == 0 {
+        return (width, height);
+    }
+    let h = (u64::from(height) * u64::from(max_width) + u64::from(width) / 2) / u64::from(width);
+    (max_width, (h as u32).max(1))
 }
 
 /// The crop (x0, y0, width, height) around a silhouette's bounding box grown `zoom` times, at
@@ -550,7 +633,7 @@ fn zoom_window(s: &Silhouette, zoom: f64) -> Option<(u32, u32, u32, u32)> {
     }
     let aspect = f64::from(s.width) / f64::from(s.height);
     let (bw, bh) = (f64::from(x1 - x0 + 1) * zoom, f64::from(y1 - y0 + 1) * zoom);
-    let cw = bw.max(bh * aspect).max(32.0).min(f64::from(s.width));
+    let cw = bw.max(bh * aspect).max(16.0).min(f64::from(s.width));
     let ch = (cw / aspect).min(f64::from(s.height));
     let (cw, ch) = (cw.round() as u32, ch.round() as u32);
     if cw >= s.width {
@@ -678,7 +761,7 @@ mod tests {
         let pose = Pose::new(nalgebra::Vector3::new(0.12, -0.05, 1.5), nalgebra::Vector3::x() * a);
         let mesh = square(0.25, 0.0);
         let full = rasterize(&mesh, &pose, &full_k);
-        let shrunk = shrink_silhouette(&full, ow, oh);
+        let shrunk = resize_silhouette(&full, ow, oh);
         let direct = rasterize(&mesh, &pose, &full_k.scaled(ow, oh));
         let iou = shrunk.iou(&direct).expect("same size");
         assert!(iou > 0.97, "IoU {iou}");

@@ -58,13 +58,14 @@ pub(crate) fn io(path: &Path) -> impl FnOnce(std::io::Error) -> ReportError + '_
 type PlotFn = fn(&Recording, &Path) -> Result<(), String>;
 
 /// Every plot a report may write (which ones depends on what the run recorded).
-const PLOT_FILES: [&str; 6] = [
+const PLOT_FILES: [&str; 7] = [
     "joints.svg",
     "tracking_error.svg",
     "lateness.svg",
     "camera_path.svg",
     "sun_phase.svg",
     "pose_error.svg",
+    "paper_error.svg",
 ];
 
 /// The list of files a report wrote, one path (relative to its folder) a line: the next report
@@ -127,7 +128,7 @@ fn pose_metrics_html(h: &mut String, m: &serde_json::Value) {
         return;
     }
     h.push_str(&format!(
-        "<tr><th>paper's pose metrics</th><td>{} frames, {} failures: e_t mean {} m (median {}), e_r mean {}&deg; (median {}) after the first-frame calibration</td></tr>",
+        "<tr><th>paper's pose metrics</th><td>{} frames, {} failures: e_t mean {} m (median {}) in real metres, e_r mean {}&deg; (median {}) after the first-frame calibration</td></tr>",
         m.get("frames").unwrap_or(&serde_json::Value::Null),
         m.get("failures").unwrap_or(&serde_json::Value::Null),
         f(g("mean_et_m"), 4),
@@ -195,6 +196,19 @@ pub fn write_report_with(
         plots.push(("pose_error.svg", "Pose error", plots::pose_error));
     }
     let mut shown = Vec::new();
+    let per_frame = summary
+        .pose_metrics
+        .as_ref()
+        .and_then(|m| m.get("per_frame"))
+        .and_then(serde_json::Value::as_array)
+        .filter(|v| !v.is_empty());
+    if let Some(rows) = per_frame {
+        let (name, p) = ("paper_error.svg", dir.join("paper_error.svg"));
+        plots::paper_error(&rec, rows, &p)
+            .map_err(|reason| ReportError::Plot { name: name.to_string(), reason })?;
+        files.push(p);
+        shown.push((name, "The paper's pose error per frame, and up to symmetry"));
+    }
     for (name, title, f) in plots {
         let p = dir.join(name);
         f(&rec, &p).map_err(|reason| ReportError::Plot { name: name.to_string(), reason })?;
@@ -255,16 +269,24 @@ fn index_html(mcap: &Path, s: &Summary, plots: &[(&str, &str)]) -> String {
             c.count, c.mean, c.p99, c.max
         ));
     }
+    if let Some(m) = &s.pose_metrics {
+        pose_metrics_html(&mut h, m);
+    }
     if let Some(p) = &s.pose_error {
         if let (Some(t), Some(r)) = (&p.translation_mm, &p.rotation_deg) {
+            let scale = s.scale.as_deref().and_then(|x| x.parse::<f64>().ok()).filter(|x| *x > 0.0);
+            let real = scale.map_or(String::new(), |k| {
+                format!(
+                    "translation mean {:.3} m (max {:.3}) in real metres, ",
+                    t.mean / 1e3 / k,
+                    t.max / 1e3 / k
+                )
+            });
             h.push_str(&format!(
-                "<tr><th>pose error</th><td>{} pairs: translation mean {:.1} mm (max {:.1}), rotation mean {:.2} deg (max {:.2})</td></tr>",
+                "<tr><th>pose error as recorded</th><td>{} pairs, no first-frame calibration: {real}{:.1} mm (max {:.1}) in the lab; rotation mean {:.2}&deg; (max {:.2})</td></tr>",
                 p.pairs, t.mean, t.max, r.mean, r.max
             ));
         }
-    }
-    if let Some(m) = &s.pose_metrics {
-        pose_metrics_html(&mut h, m);
     }
     let drops: u64 = s.dropped.values().sum();
     h.push_str(&format!(

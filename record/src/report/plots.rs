@@ -84,7 +84,7 @@ fn mark_events<DB: DrawingBackend>(
 /// Setpoint (solid) and measured (dots) for each joint, one panel per joint.
 pub fn joints(rec: &Recording, out: &Path) -> Res {
     let t0 = t0(rec);
-    let root = SVGBackend::new(out, (1000, 1400)).into_drawing_area();
+    let root = SVGBackend::new(out, (1000, 1600)).into_drawing_area();
     root.fill(&WHITE).map_err(err)?;
     let sp: Vec<(f64, [f64; DOF])> = thin(
         &rec.setpoints.iter().map(|s| (secs(s.t_ns, t0), s.q)).collect::<Vec<_>>(),
@@ -99,26 +99,35 @@ pub fn joints(rec: &Recording, out: &Path) -> Res {
         let mut chart = ChartBuilder::on(area)
             .margin(6)
             .caption(format!("joint {} (deg)", j + 1), ("sans-serif", 14))
-            .x_label_area_size(22)
+            .x_label_area_size(40)
             .y_label_area_size(55)
             .build_cartesian_2d(xs.clone(), ys.clone())
             .map_err(err)?;
-        chart.configure_mesh().x_desc("t (s)").light_line_style(WHITE).draw().map_err(err)?;
         chart
-            .draw_series(LineSeries::new(
-                sp.iter().map(|p| (p.0, p.1[j].to_degrees())),
-                BLUE.stroke_width(1),
-            ))
-            .map_err(err)?
-            .label("setpoint")
-            .legend(|(x, y)| PathElement::new(vec![(x, y), (x + 15, y)], BLUE));
+            .configure_mesh()
+            .x_desc("t (s)")
+            .x_label_offset(0)
+            .light_line_style(WHITE)
+            .draw()
+            .map_err(err)?;
+        // The measured dots first, pale, and the setpoint line over them: where the arm follows
+        // its setpoint the dots sit on the line and must not hide it.
+        let measured = GREEN.mix(0.45);
         chart
             .draw_series(
-                st.iter().map(|p| Circle::new((p.0, p.1[j].to_degrees()), 1, GREEN.filled())),
+                st.iter().map(|p| Circle::new((p.0, p.1[j].to_degrees()), 1, measured.filled())),
             )
             .map_err(err)?
             .label("measured")
-            .legend(|(x, y)| Circle::new((x + 7, y), 3, GREEN.filled()));
+            .legend(move |(x, y)| Circle::new((x + 7, y), 3, measured.filled()));
+        chart
+            .draw_series(LineSeries::new(
+                sp.iter().map(|p| (p.0, p.1[j].to_degrees())),
+                BLUE.stroke_width(2),
+            ))
+            .map_err(err)?
+            .label("setpoint")
+            .legend(|(x, y)| PathElement::new(vec![(x, y), (x + 15, y)], BLUE.stroke_width(2)));
         mark_events(&mut chart, &events, &ys)?;
         chart
             .configure_series_labels()
@@ -292,7 +301,8 @@ pub fn sun_phase(rec: &Recording, out: &Path) -> Res {
     root.present().map_err(err)
 }
 
-/// Estimate vs ground truth, translation (mm) and rotation (deg).
+/// Estimate vs ground truth as recorded (no first-frame calibration): translation in lab
+/// millimetres and rotation (deg).
 pub fn pose_error(rec: &Recording, out: &Path) -> Res {
     let e = thin(&pose_errors(rec), MAX_POINTS);
     let root = SVGBackend::new(out, (1000, 600)).into_drawing_area();
@@ -301,7 +311,9 @@ pub fn pose_error(rec: &Recording, out: &Path) -> Res {
     let xs = span(e.iter().map(|p| p.0));
     let events = event_times(rec);
     for (k, (title, unit)) in
-        [("translation error", "mm"), ("rotation error", "deg")].iter().enumerate()
+        [("translation error as recorded", "lab mm"), ("rotation error as recorded", "deg")]
+            .iter()
+            .enumerate()
     {
         let vals: Vec<(f64, f64)> =
             e.iter().map(|p| (p.0, if k == 0 { p.1 * 1e3 } else { p.2.to_degrees() })).collect();
@@ -309,7 +321,7 @@ pub fn pose_error(rec: &Recording, out: &Path) -> Res {
         let mut c = ChartBuilder::on(&parts[k])
             .margin(10)
             .caption(format!("pose {title} ({unit})"), ("sans-serif", 16))
-            .x_label_area_size(30)
+            .x_label_area_size(40)
             .y_label_area_size(55)
             .build_cartesian_2d(xs.clone(), ys.clone())
             .map_err(err)?;
@@ -317,6 +329,61 @@ pub fn pose_error(rec: &Recording, out: &Path) -> Res {
         c.draw_series(LineSeries::new(vals.iter().copied(), BLUE)).map_err(err)?;
         c.draw_series(vals.iter().map(|p| Circle::new(*p, 2, BLUE.filled()))).map_err(err)?;
         mark_events(&mut c, &events, &ys)?;
+    }
+    root.present().map_err(err)
+}
+
+/// The paper's per-frame errors over the run (`hitl eval`'s, after the first-frame calibration):
+/// e_t in real metres, and e_r with its symmetry-aware counterpart in degrees. `per_frame` is
+/// the report's `pose_metrics.per_frame` (objects with `t_ns`, `et_m`, `er_deg`, `et_sym_m`,
+/// `er_sym_deg`); frames with no estimate are not in it.
+pub fn paper_error(rec: &Recording, per_frame: &[serde_json::Value], out: &Path) -> Res {
+    let t0 = t0(rec);
+    let g = |v: &serde_json::Value, k: &str| v.get(k).and_then(serde_json::Value::as_f64);
+    let rows: Vec<(f64, [f64; 4])> = per_frame
+        .iter()
+        .filter_map(|v| {
+            let t = v.get("t_ns").and_then(serde_json::Value::as_u64)?;
+            let e = [g(v, "et_m")?, g(v, "et_sym_m")?, g(v, "er_deg")?, g(v, "er_sym_deg")?];
+            Some((secs(t, t0), e))
+        })
+        .collect();
+    let rows = thin(&rows, MAX_POINTS);
+    let root = SVGBackend::new(out, (1000, 600)).into_drawing_area();
+    root.fill(&WHITE).map_err(err)?;
+    let parts = root.split_evenly((2, 1));
+    let xs = span(rows.iter().map(|p| p.0));
+    let panels = [
+        ("e_t, the paper's translation error (real m)", "m", 0),
+        ("e_r, the paper's rotation error (deg)", "deg", 2),
+    ];
+    for (k, (title, unit, col)) in panels.iter().enumerate() {
+        let ys = span(rows.iter().flat_map(|p| [p.1[*col], p.1[col + 1]]).chain([0.0]));
+        let mut c = ChartBuilder::on(&parts[k])
+            .margin(10)
+            .caption(*title, ("sans-serif", 16))
+            .x_label_area_size(40)
+            .y_label_area_size(65)
+            .build_cartesian_2d(xs.clone(), ys)
+            .map_err(err)?;
+        c.configure_mesh().x_desc("t (s)").y_desc(*unit).draw().map_err(err)?;
+        let sym = RGBColor(230, 120, 0);
+        c.draw_series(LineSeries::new(rows.iter().map(|p| (p.0, p.1[*col])), BLUE))
+            .map_err(err)?
+            .label("as the paper scores it")
+            .legend(|(x, y)| PathElement::new(vec![(x, y), (x + 15, y)], BLUE));
+        c.draw_series(LineSeries::new(
+            rows.iter().map(|p| (p.0, p.1[col + 1])),
+            sym.stroke_width(2),
+        ))
+        .map_err(err)?
+        .label("up to the target's symmetry")
+        .legend(move |(x, y)| PathElement::new(vec![(x, y), (x + 15, y)], sym.stroke_width(2)));
+        c.configure_series_labels()
+            .background_style(WHITE.mix(0.8))
+            .border_style(BLACK)
+            .draw()
+            .map_err(err)?;
     }
     root.present().map_err(err)
 }

@@ -23,6 +23,8 @@ enum Kind {
     Count,
     /// `FROM:TO` degrees (a window of oriented Sun phase, or of argument of latitude).
     Window,
+    /// `FROM:TO` degrees with 0 <= FROM < TO <= 180: a region of unsigned Sun phase angle.
+    PhaseRegion,
     /// An integer face budget, or "full" for the ground-truth mesh as it is.
     Faces,
     /// A path, resolved relative to the manifest's folder (`[run]` only).
@@ -53,6 +55,7 @@ const KEYS: &[KeyDef] = &[
     KeyDef { name: "range_m", kind: Kind::Positive, default: Some(|| json!(10.0)), matrix: true },
     KeyDef { name: "sun_phase_deg", kind: Kind::Window, default: None, matrix: true },
     KeyDef { name: "arc_deg", kind: Kind::Window, default: None, matrix: true },
+    KeyDef { name: "phase_angle_deg", kind: Kind::PhaseRegion, default: None, matrix: true },
     KeyDef {
         name: "target",
         kind: Kind::Text,
@@ -330,6 +333,18 @@ fn value(key: &KeyDef, v: &toml::Value, base: &Path) -> Result<Value, ManifestEr
             toml::Value::String(s) => match parse_window(s) {
                 Some((a, b)) => Ok(json!(format!("{a}:{b}"))),
                 None => Err(bad(format!("`{name}`: expected \"FROM:TO\" in degrees, got {v}"))),
+            },
+            _ => Err(bad(format!("`{name}`: expected \"FROM:TO\" in degrees, got {v}"))),
+        },
+        Kind::PhaseRegion => match v {
+            toml::Value::String(s) => match parse_window(s) {
+                Some((a, b)) if (0.0..b).contains(&a) && b <= 180.0 => {
+                    Ok(json!(format!("{a}:{b}")))
+                }
+                _ => Err(bad(format!(
+                    "`{name}`: expected \"FROM:TO\", degrees of phase angle with 0 <= FROM < TO \
+                     <= 180, got {v}"
+                ))),
             },
             _ => Err(bad(format!("`{name}`: expected \"FROM:TO\" in degrees, got {v}"))),
         },
@@ -662,6 +677,11 @@ mod tests {
         assert!(e("[run]\nrange_m = -5\n").contains("`range_m`"));
         assert!(e("[run]\nmesh_faces = 2\n").contains("`mesh_faces`"));
         assert!(e("[run]\nsun_phase_deg = \"a:b\"\n").contains("`sun_phase_deg`"));
+        // A phase angle is 0-180 deg, FROM below TO.
+        for bad in ["\"170:190\"", "\"36:0\"", "\"-1:36\"", "36"] {
+            let m = format!("[run]\nphase_angle_deg = {bad}\n");
+            assert!(e(&m).contains("`phase_angle_deg`"), "{bad}");
+        }
         assert!(e("[run]\nrange_m = 5\n[matrix]\nrange_m = [5]\n").contains("both"));
         assert!(e("[matrix]\nconfig = [\"a.toml\"]\n").contains("`config`"));
         assert!(e("[extra]\n").contains("`extra`"));
@@ -703,6 +723,7 @@ mod tests {
                 .map(|i| match def.kind {
                     Kind::Text => format!("\"v{i}\""),
                     Kind::Window => format!("\"{i}:{}\"", i + 10),
+                    Kind::PhaseRegion => format!("\"{i}:{}\"", i + 100),
                     _ => format!("{}", i + 4),
                 })
                 .collect();

@@ -73,6 +73,10 @@ pub struct CollectArgs {
 pub struct ListArgs {
     /// The manifest.
     pub manifest: PathBuf,
+    /// Print one JSON object: the campaign's name and each case's index, id, full definition,
+    /// varied keys, the Sun it plays under and the phase angles its arc sees.
+    #[arg(long)]
+    pub json: bool,
 }
 
 /// Flags of `hitl campaign slurm`.
@@ -169,6 +173,36 @@ fn list(a: &ListArgs) -> u8 {
         Ok(x) => x,
         Err(code) => return code,
     };
+    if a.json {
+        let mut cases = Vec::new();
+        // Cases that differ only in target or estimator share their Sun: found once.
+        let mut found: std::collections::HashMap<String, Result<phase::CaseSun, String>> =
+            std::collections::HashMap::new();
+        for c in m.cases() {
+            let key = ["preset", "range_m", "arc_deg", "sun_phase_deg", "phase_angle_deg"]
+                .map(|k| c.cell(k))
+                .join("|");
+            let sun = found.entry(key).or_insert_with(|| run::case_sun(&c)).clone();
+            let (sun, phase) = match sun {
+                Ok(s) => (
+                    serde_json::json!(s.sun_eci),
+                    serde_json::json!([s.phase_angle_deg.0, s.phase_angle_deg.1]),
+                ),
+                Err(e) => (serde_json::Value::Null, serde_json::json!({ "error": e })),
+            };
+            cases.push(serde_json::json!({
+                "index": c.index,
+                "id": c.id,
+                "params": c.params,
+                "varied": c.varied,
+                "sun_eci": sun,
+                "phase_angle_deg": phase,
+            }));
+        }
+        let out = serde_json::json!({ "campaign": m.name, "cases": cases });
+        crate::outln!("{out}");
+        return exit::OK;
+    }
     crate::outln!("campaign {}: {} cases", m.name, m.len());
     for c in m.cases() {
         let what: Vec<String> = c.varied.iter().map(|k| format!("{k}={}", c.cell(k))).collect();

@@ -395,6 +395,16 @@ pub(super) fn plan_args(case: &Case, out: &Path) -> Result<(Vec<String>, Option<
         let (from, to) = phase::arc_for_window(&preset, range, window)?;
         arc = Some(format!("{from}:{to}"));
     }
+    if case.text("phase_angle_deg").is_some() {
+        if case.text("sun_phase_deg").is_some() {
+            return Err("sun_phase_deg picks the arc under the default Sun, phase_angle_deg the \
+                        Sun for the arc: give one"
+                .into());
+        }
+        let sun = case_sun(case)?;
+        let [x, y, z] = sun.sun_eci;
+        a.extend([s("--sun-eci"), format!("{x},{y},{z}")]);
+    }
     if let Some(arc) = &arc {
         a.extend([s("--arc"), arc.clone()]);
     }
@@ -402,6 +412,23 @@ pub(super) fn plan_args(case: &Case, out: &Path) -> Result<(Vec<String>, Option<
         a.extend([s("--config"), s(c)]);
     }
     Ok((a, arc))
+}
+
+/// The Sun a case plays under and the phase angles its arc sees (`phase_angle_deg` chooses the
+/// Sun; `sun_phase_deg` chooses the arc under the default Sun).
+pub(super) fn case_sun(case: &Case) -> Result<phase::CaseSun, String> {
+    let preset = case.text("preset").unwrap_or("flyaround");
+    let range = case.number("range_m").unwrap_or(10.0);
+    let window = |key: &str| -> Result<Option<(f64, f64)>, String> {
+        case.text(key)
+            .map(|w| super::manifest::parse_window(w).ok_or(format!("{key} {w:?}")))
+            .transpose()
+    };
+    let mut arc = window("arc_deg")?;
+    if let Some(w) = window("sun_phase_deg")? {
+        arc = Some(phase::arc_for_window(preset, range, w)?);
+    }
+    phase::case_sun(preset, range, arc, window("phase_angle_deg")?)
 }
 
 /// `hitl run` arguments of a case.
