@@ -400,6 +400,7 @@ fn play_views(
         stub_start_q: None,
         plain_progress: args.plain || !std::io::stderr().is_terminal(),
         live: None,
+        clock: session::ClockChoice::Realtime,
     };
     match session::run(request) {
         Ok(r) if r.exit_code == exit::OK => {}

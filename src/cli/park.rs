@@ -94,6 +94,7 @@ pub fn run(args: ParkArgs) -> u8 {
         stub_start_q: args.stub_start_q,
         plain_progress: args.plain || !std::io::stderr().is_terminal(),
         live: None,
+        clock: session::ClockChoice::Realtime,
     };
     match session::run(request) {
         Ok(report) => {

@@ -265,8 +265,9 @@ pub fn open_camera(
             let sim = ctx.sim_needed("camera")?;
             let config = SimCameraConfig {
                 intrinsics: stream.intrinsics,
-                clock: ctx.clock,
+                clock: ctx.clock.clone(),
                 noise: sim.camera_noise,
+                backlog: sim.render_backlog.clone(),
                 ..Default::default()
             };
             let cam =
@@ -283,7 +284,7 @@ pub fn open_camera(
             return Err(DeviceError::BadInput("--camera sim needs the stub feature".into()))
         }
         CameraSpec::Orbbec(o) => {
-            let cam = open_orbbec(o, ctx.clock)?;
+            let cam = open_orbbec(o, ctx.clock.clone())?;
             let name = format!("Orbbec camera {}", cam.info().serial);
             // Its lifecycle's stop writes the camera's configuration back (so does dropping it).
             RunCamera { dev: Box::new(Kinds::new(cam)), name, delivers_frames: true }

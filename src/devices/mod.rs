@@ -52,6 +52,8 @@ pub struct SimScene<'a> {
     pub inputs: hitl_sim_stub::SimInputsReader,
     /// The simulated camera's noise and depth model.
     pub camera_noise: hitl_sim_stub::camera::NoiseModel,
+    /// The simulated camera's captures taken and rendered (a simulated clock waits on them).
+    pub render_backlog: &'a hitl_sim_stub::camera::RenderBacklog,
 }
 
 /// `--depth-model`: how the simulated camera's depth is degraded (docs/sim-camera.md).

@@ -20,11 +20,15 @@ pub struct EmbeddedStub {
     arm: SharedArmState,
     light: hitl_sim_stub::camera::LightLevel,
     camera_noise: hitl_sim_stub::camera::NoiseModel,
+    render_backlog: hitl_sim_stub::camera::RenderBacklog,
 }
 
 /// Start the stub on loopback for `lab`, with `target` (in model units) shown at `scale`, the
 /// scene drawn as `scene` says, and `faults` scheduled from its start; its arm powers up at
 /// `initial_q` (`None`: the stub's own power-up pose).
+///
+/// `simulated`: the stub runs on the run's simulated clock (`--clock sim`): nothing in it keeps
+/// time, the run advances it ([`EmbeddedStub::advance_to`]).
 ///
 /// `fifo_priority` is the run loop's SCHED_FIFO priority, if it has one. A box has CPUs of its
 /// own; the embedded stub shares the run's, so its threads (physics, command and report ports)
@@ -39,6 +43,7 @@ pub fn start_stub(
     scene: &hitl_sim_stub::mjcf::SceneOptions,
     fifo_priority: Option<i32>,
     initial_q: Option<hitl_hal::Joints>,
+    simulated: bool,
 ) -> Result<EmbeddedStub, DeviceError> {
     let lab_model = LabModel::generated_scene(lab, &stub_target(target, scale), scene)
         .map_err(|e| DeviceError::Failed(format!("stub scene: {e}")))?;
@@ -53,7 +58,7 @@ pub fn start_stub(
         None => hitl_sim_stub::ThreadStart::default(),
     };
     let mut config =
-        StubConfig { faults: faults.to_vec(), thread_start, ..StubConfig::ephemeral() };
+        StubConfig { faults: faults.to_vec(), thread_start, simulated, ..StubConfig::ephemeral() };
     if let Some(q) = initial_q {
         config.initial_q = q;
     }
@@ -65,6 +70,7 @@ pub fn start_stub(
         arm,
         light: Default::default(),
         camera_noise: Default::default(),
+        render_backlog: Default::default(),
     })
 }
 
@@ -139,7 +145,28 @@ impl EmbeddedStub {
             light: &self.light,
             inputs: self.handle.inputs(),
             camera_noise: self.camera_noise,
+            render_backlog: &self.render_backlog,
         }
+    }
+
+    /// On a simulated clock: step the stub to `t_ns` (physics, faults, reports due by then).
+    pub fn advance_to(&self, t_ns: u64) {
+        self.handle.advance_to(t_ns);
+    }
+
+    /// On a simulated clock, the stub's counters; `None` on the wall clock.
+    pub fn sim(&self) -> Option<&hitl_sim_stub::server::sim_clock::SimState> {
+        self.handle.sim()
+    }
+
+    /// Whether the stub's command port is stalled by a fault now.
+    pub fn replies_stalled(&self) -> bool {
+        self.handle.replies_stalled()
+    }
+
+    /// Whether every capture the simulated camera took has been rendered.
+    pub fn renders_done(&self) -> bool {
+        self.render_backlog.idle()
     }
 
     /// Shut the stub down; where its arm ended.
