@@ -35,6 +35,7 @@ pub struct EmbeddedStub {
 /// run just below the loop and its report reader (`fifo_priority - 2`): rendering, perception
 /// and recording on the normal scheduler then cannot make the simulated arm lag its commands,
 /// which the controller would rightly stop as a joint deviation.
+#[allow(clippy::too_many_arguments)]
 pub fn start_stub(
     faults: &[StubFault],
     lab: &LabConfig,
