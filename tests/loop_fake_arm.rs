@@ -182,8 +182,13 @@ fn run_with(
     let clock = MonotonicClock::new();
     let (slot, reports) = LatestSlot::new();
     slot.publish(ArmState { received_ns: clock.now_ns(), q: START, ..Default::default() });
-    let mut arm =
-        FakeArm { sent: Vec::with_capacity(10_000), reports: slot, script, stopped: false, clock };
+    let mut arm = FakeArm {
+        sent: Vec::with_capacity(10_000),
+        reports: slot,
+        script,
+        stopped: false,
+        clock: clock.clone(),
+    };
     let health = Health::default();
     let status = Arc::new(LoopStatus::default());
     let limits = MoveLimits::uniform(1.0, 4.0, 60.0);
@@ -428,7 +433,7 @@ fn the_real_client_against_the_stub_allocates_and_frees_nothing_on_the_loop_thre
         ReportConfig {
             port: Some(port(ReportKind::Real)),
             codes_port: Some(port(ReportKind::Normal)),
-            clock,
+            clock: clock.clone(),
             ..ReportConfig::default()
         },
     )

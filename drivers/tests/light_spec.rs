@@ -56,11 +56,11 @@ async fn non_serial_lights_open_to_none_and_a_missing_port_is_named() {
     use hitl_drivers::light::TriggerSpec;
     use hitl_hal::{Error, ErrorKind, MonotonicClock};
     let clock = MonotonicClock::new();
-    assert!(LightSpec::Sim.open(clock).await.unwrap().is_none());
-    assert!(LightSpec::None.open(clock).await.unwrap().is_none());
-    assert!(TriggerSpec::None.open(clock).await.unwrap().is_none());
+    assert!(LightSpec::Sim.open(clock.clone()).await.unwrap().is_none());
+    assert!(LightSpec::None.open(clock.clone()).await.unwrap().is_none());
+    assert!(TriggerSpec::None.open(clock.clone()).await.unwrap().is_none());
     let spec: LightSpec = "trigger:/dev/hitl-missing-box".parse().unwrap();
-    let Err(e) = spec.open(clock).await else { panic!("missing port opened") };
+    let Err(e) = spec.open(clock.clone()).await else { panic!("missing port opened") };
     assert_eq!(e.kind(), ErrorKind::NotFound);
     let trigger: TriggerSpec = "trigger:/dev/hitl-missing-box".parse().unwrap();
     let Err(e) = trigger.open(clock).await else { panic!("missing port opened") };

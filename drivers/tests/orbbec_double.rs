@@ -207,7 +207,7 @@ fn rig_on(
     let double =
         Double { pid, global, steps: rx, log: Arc::clone(&log), device: Arc::clone(&device) };
     let mut options = OrbbecOptions {
-        clock,
+        clock: clock.clone(),
         frame_timeout: Duration::from_millis(60),
         state_dir: Some(state_dir.path().to_path_buf()),
         ..OrbbecOptions::default()

@@ -185,7 +185,8 @@ const CAMERA: TriggerLines = TriggerLines { camera: true, light: false };
 async fn fires_are_acknowledged_with_device_timestamps() {
     let peer = BoxPeer::start();
     let clock = MonotonicClock::new();
-    let mut tb = TriggerBox::open(&peer.path, config(), clock).await.expect("open trigger box");
+    let mut tb =
+        TriggerBox::open(&peer.path, config(), clock.clone()).await.expect("open trigger box");
     assert_eq!(
         peer.received().get(..2),
         Some(&["P 1".to_string(), "V 2".to_string()][..]),

@@ -25,7 +25,7 @@ pub use arm::{Arm, ArmReports, ArmState, Joints, DOF};
 pub use camera::{
     CaptureRequest, Intrinsics, RgbdCamera, RgbdFrame, SharedPixels, StreamConfig, TimestampSource,
 };
-pub use clock::{Clock, MonotonicClock};
+pub use clock::{Clock, MonotonicClock, SimTime};
 pub use error::{Error, ErrorKind, ErrorType};
 pub use inputs::{InputState, Inputs};
 pub use lens::{Distortion, DistortionModel};

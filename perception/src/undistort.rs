@@ -92,9 +92,9 @@ mod tests {
             seq: 9,
             intrinsics: k,
             // Depth holds the pixel's column, the mask its row parity.
-            depth_m: (0..n).map(|i| (i % k.width as usize) as f32).collect(),
-            color: (0..3 * n).map(|i| (i / 3 % k.width as usize) as u8).collect(),
-            mask: Some((0..n).map(|i| (i / k.width as usize % 2) as u8).collect()),
+            depth_m: (0..n).map(|i| (i % k.width as usize) as f32).collect::<Vec<_>>().into(),
+            color: (0..3 * n).map(|i| (i / 3 % k.width as usize) as u8).collect::<Vec<_>>().into(),
+            mask: Some((0..n).map(|i| (i / k.width as usize % 2) as u8).collect::<Vec<_>>().into()),
         }
     }
 

@@ -115,6 +115,28 @@ pub struct SimCameraConfig {
     pub clock: MonotonicClock,
     /// Captures that may wait for the render thread; a trigger beyond this is refused.
     pub queue: usize,
+    /// Counts captures taken and rendered (a host on a simulated clock waits until they match).
+    pub backlog: RenderBacklog,
+}
+
+/// Captures the camera has taken and the ones its render thread has finished (delivered or
+/// dropped); cheap to clone, readable from any thread.
+#[derive(Debug, Clone, Default)]
+pub struct RenderBacklog(Arc<(AtomicU64, AtomicU64)>);
+
+impl RenderBacklog {
+    /// Whether every capture taken so far has been rendered.
+    pub fn idle(&self) -> bool {
+        self.0 .1.load(Ordering::Acquire) >= self.0 .0.load(Ordering::Acquire)
+    }
+
+    fn taken(&self) {
+        self.0 .0.fetch_add(1, Ordering::AcqRel);
+    }
+
+    fn finished(&self) {
+        self.0 .1.fetch_add(1, Ordering::AcqRel);
+    }
 }
 
 impl Default for SimCameraConfig {
@@ -127,6 +149,7 @@ impl Default for SimCameraConfig {
             shading: Shading::default(),
             clock: MonotonicClock::new(),
             queue: 4,
+            backlog: RenderBacklog::default(),
         }
     }
 }
@@ -186,6 +209,7 @@ pub struct SimCamera {
     armed: bool,
     last_truth: Option<RenderTruth>,
     dropped: Arc<AtomicU64>,
+    backlog: RenderBacklog,
 }
 
 impl std::fmt::Debug for SimCamera {
@@ -220,6 +244,7 @@ impl SimCamera {
         let shading = config.shading;
         let size = (config.intrinsics.width, config.intrinsics.height);
         let (worker_stream, worker_dropped) = (stream.clone(), dropped.clone());
+        let backlog = config.backlog.clone();
         let worker = move |renderer| Worker {
             renderer,
             noise: config.noise,
@@ -227,6 +252,7 @@ impl SimCamera {
             lens: LensCache::default(),
             frames: frame_tx,
             dropped: worker_dropped,
+            backlog,
         };
         let thread = std::thread::Builder::new()
             .name("sim-camera".into())
@@ -261,6 +287,7 @@ impl SimCamera {
             armed: false,
             last_truth: None,
             dropped,
+            backlog: config.backlog,
         })
     }
 
@@ -337,7 +364,10 @@ impl RgbdCamera for SimCamera {
             level: self.light.get(),
         };
         match tx.try_send(exposure) {
-            Ok(()) => Ok(()),
+            Ok(()) => {
+                self.backlog.taken();
+                Ok(())
+            }
             Err(TrySendError::Full(_)) => Err(SimCameraError::Busy(request.tick)),
             Err(TrySendError::Disconnected(_)) => Err(SimCameraError::Disconnected),
         }
@@ -453,6 +483,7 @@ struct Worker {
     lens: LensCache,
     frames: Sender<(RgbdFrame, RenderTruth)>,
     dropped: Arc<AtomicU64>,
+    backlog: RenderBacklog,
 }
 
 impl Worker {
@@ -460,10 +491,14 @@ impl Worker {
         while let Ok(exposure) = exposures.recv() {
             // A renderer that fails after it opened ends the thread: the camera then reports
             // itself disconnected at the next poll, which faults the run.
-            let Ok(out) = self.capture(exposure) else { return };
+            let Ok(out) = self.capture(exposure) else {
+                self.backlog.finished();
+                return;
+            };
             if self.frames.try_send(out).is_err() {
                 self.dropped.fetch_add(1, Ordering::Relaxed);
             }
+            self.backlog.finished();
         }
     }
 

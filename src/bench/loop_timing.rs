@@ -11,7 +11,7 @@
 //! memory traffic) and perception-like work (floating-point loops).
 
 use super::load::under_load;
-use crate::rt::{os, Periodic, RtOptions};
+use crate::rt::{os, Pace, Periodic, RtOptions};
 use crossbeam::queue::ArrayQueue;
 use hitl_hal::DOF;
 use serde_json::{json, Value};

@@ -174,6 +174,7 @@ impl Worker {
             // The capture record follows the frame's tick; give a late one a moment.
             self.take_states();
             self.handle(frame);
+            self.queues.frames_done.fetch_add(1, Ordering::AcqRel);
             worked = true;
         }
         // Frames the tick could not queue: freed here, off the loop thread.

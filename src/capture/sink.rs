@@ -23,6 +23,8 @@ pub struct IntakeQueues {
     pub captures: ArrayQueue<CaptureOut>,
     /// Frames handed over by the camera (queued or lost).
     pub frames_in: AtomicU64,
+    /// Frames the intake has finished with (recorded or not, handed to perception).
+    pub frames_done: AtomicU64,
     /// Captures the camera was too busy to take.
     pub captures_missed: AtomicU64,
     /// Frames that found the intake queue full.
@@ -41,6 +43,7 @@ impl IntakeQueues {
             states: ArrayQueue::new(4096),
             captures: ArrayQueue::new(256),
             frames_in: AtomicU64::new(0),
+            frames_done: AtomicU64::new(0),
             captures_missed: AtomicU64::new(0),
             frames_lost: AtomicU64::new(0),
             discard: ArrayQueue::new(64),

@@ -449,6 +449,7 @@ fn play_views(
         plain_progress: args.plain || !std::io::stderr().is_terminal(),
         live: None,
         closed_loop: None,
+        clock: session::ClockChoice::Realtime,
     };
     match session::run(request) {
         Ok(r) if r.exit_code == exit::OK => {}

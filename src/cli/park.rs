@@ -95,6 +95,7 @@ pub fn run(args: ParkArgs) -> u8 {
         plain_progress: args.plain || !std::io::stderr().is_terminal(),
         live: None,
         closed_loop: None,
+        clock: session::ClockChoice::Realtime,
     };
     match session::run(request) {
         Ok(report) => {

@@ -199,7 +199,7 @@ async fn probe_trigger_box(
     describe: bool,
 ) -> Result<(), String> {
     let clock = MonotonicClock::new();
-    let mut tb = TriggerBox::open(port, TriggerBoxConfig::default(), clock)
+    let mut tb = TriggerBox::open(port, TriggerBoxConfig::default(), clock.clone())
         .await
         .map_err(|e| e.to_string())?;
     // `open` has seen the ping's answer, the version and a first input report.

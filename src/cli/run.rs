@@ -10,7 +10,7 @@ use crate::cli::reregister::ReregisterArgs;
 use crate::devices::CameraSpec;
 use crate::exit;
 use crate::rt::RtOptions;
-use crate::session::{self, ArmTarget, RunRequest, StubFault};
+use crate::session::{self, ArmTarget, ClockChoice, RunRequest, StubFault};
 use hitl_perception::BackendSpec;
 use hitl_record::live::DEFAULT_LIVE_ADDR;
 use hitl_record::{ChunkCompression, LiveConfig, RecorderConfig};
@@ -131,6 +131,12 @@ pub struct RunArgs {
     /// complete.
     #[arg(long, value_name = "S", requires = "closed_loop")]
     pub drill_perception_stop_s: Option<f64>,
+    /// Which time the run lives on: realtime (the host's clock) or sim (simulated time moved
+    /// tick by tick in lockstep with the embedded stub: as fast as the machine allows, and two
+    /// runs of the same inputs record the same messages). sim is refused with --arm
+    /// (docs/sim-clock.md).
+    #[arg(long, value_enum, default_value_t = ClockChoice::Realtime)]
+    pub clock: ClockChoice,
 }
 
 fn parse_live_addr(s: &str) -> Result<SocketAddr, String> {
@@ -168,6 +174,13 @@ pub fn run(args: RunArgs, record: bool) -> u8 {
         return exit::BAD_INPUT;
     }
     let arm = args.devices.arm.as_deref();
+    if let (ClockChoice::Sim, Some(host)) = (args.clock, arm) {
+        crate::errln!(
+            "hitl run: --clock sim runs on the embedded stub only; a real arm ({host}) keeps real \
+             time: use --clock realtime with --arm"
+        );
+        return exit::BAD_INPUT;
+    }
     let labs = match args.labs.load(arm) {
         Ok(labs) => labs,
         Err(Refusal(code, m)) => {
@@ -250,6 +263,7 @@ pub fn run(args: RunArgs, record: bool) -> u8 {
             drill_perception_stop_s: args.drill_perception_stop_s,
             ..Default::default()
         }),
+        clock: args.clock,
     };
     match session::run(request) {
         Ok(report) => {

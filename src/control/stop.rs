@@ -9,7 +9,7 @@
 use super::motion::{plan_stop, MoveLimits};
 use crossbeam::queue::ArrayQueue;
 use hitl_hal::JointState;
-use std::sync::atomic::{AtomicBool, Ordering};
+use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
 use std::sync::Arc;
 use std::thread::{self, JoinHandle, Thread};
 use std::time::Duration;
@@ -55,6 +55,8 @@ impl StopPlan {
 
 /// The tick's side: request a stop, pick up the plan. Never blocks or allocates.
 pub struct StopRequester {
+    /// Requests made and plans made, counted (a simulated clock waits until they match).
+    counts: Arc<(AtomicU64, AtomicU64)>,
     requests: Arc<ArrayQueue<StopRequest>>,
     plans: Arc<ArrayQueue<StopPlan>>,
     planner: Thread,
@@ -62,6 +64,7 @@ pub struct StopRequester {
 
 impl StopRequester {
     pub fn request(&self, request: StopRequest) {
+        self.counts.0.fetch_add(1, Ordering::AcqRel);
         let _ = self.requests.force_push(request);
         self.planner.unpark();
     }
@@ -73,6 +76,7 @@ impl StopRequester {
 
 /// The planner thread; joins on drop.
 pub struct StopPlanner {
+    counts: Arc<(AtomicU64, AtomicU64)>,
     shutdown: Arc<AtomicBool>,
     handle: Option<JoinHandle<()>>,
 }
@@ -90,6 +94,8 @@ impl StopPlanner {
         let capacity = ((max_seconds / dt).ceil() as usize).max(2);
         let mut buffer = Some(vec![JointState::default(); capacity].into_boxed_slice());
         let (req, out, stop) = (Arc::clone(&requests), Arc::clone(&plans), Arc::clone(&shutdown));
+        let counts = Arc::new((AtomicU64::new(0), AtomicU64::new(0)));
+        let planned = Arc::clone(&counts);
         let handle = thread::Builder::new().name("hitl-stop-planner".into()).spawn(move || {
             while !stop.load(Ordering::Acquire) {
                 let Some(request) = req.pop() else {
@@ -99,10 +105,19 @@ impl StopPlanner {
                 let Some(mut samples) = buffer.take() else { continue };
                 let len = plan_stop(&request.from, &limits, dt, &mut samples).unwrap_or(0);
                 let _ = out.force_push(StopPlan { from_tick: request.from_tick, samples, len });
+                planned.1.fetch_add(1, Ordering::AcqRel);
             }
         })?;
         let planner = handle.thread().clone();
-        Ok((Self { shutdown, handle: Some(handle) }, StopRequester { requests, plans, planner }))
+        Ok((
+            Self { counts: Arc::clone(&counts), shutdown, handle: Some(handle) },
+            StopRequester { counts, requests, plans, planner },
+        ))
+    }
+
+    /// Whether every stop requested so far has been planned (and its plan handed over).
+    pub fn settled(&self) -> bool {
+        self.counts.1.load(Ordering::Acquire) >= self.counts.0.load(Ordering::Acquire)
     }
 }
 

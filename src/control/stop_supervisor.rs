@@ -184,8 +184,9 @@ mod tests {
         let mut arm = Box4 { stops: Rc::clone(&stops), fail: false };
         // A stale report already says 4: it must not count. The box stops on the third request.
         let seen = Rc::clone(&stops);
+        let c = clock.clone();
         let mut latest =
-            move || Some(if seen.get() >= 3 { state(clock.now_ns(), 4) } else { state(0, 4) });
+            move || Some(if seen.get() >= 3 { state(c.now_ns(), 4) } else { state(0, 4) });
         let r = supervise_stop(&mut arm, &mut latest, &clock, fast());
         assert!(r.confirmed, "{r:?}");
         assert_eq!(r.requests, 3);
@@ -199,7 +200,8 @@ mod tests {
         let clock = MonotonicClock::new();
         let stops = Rc::new(Cell::new(0));
         let mut arm = Box4 { stops: Rc::clone(&stops), fail: true };
-        let mut latest = move || Some(state(clock.now_ns(), 1));
+        let c = clock.clone();
+        let mut latest = move || Some(state(c.now_ns(), 1));
         let t = std::time::Instant::now();
         let r = supervise_stop(&mut arm, &mut latest, &clock, fast());
         let took = t.elapsed();

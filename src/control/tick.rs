@@ -11,7 +11,7 @@
 use super::correction::CorrectionStage;
 use super::interlocks::{Interlocks, Reaction, Sense};
 use super::stop::{StopPlan, StopRequest, StopRequester};
-use crate::rt::{probe, slot::SlotReader, Periodic, Wake};
+use crate::rt::{probe, slot::SlotReader, Pace, Periodic, Wake};
 use crate::telemetry::{CaptureOut, LoopStatus, SetpointOut, TelemetrySink, TimingOut};
 use crate::telemetry::{Device, Trip, TripKind};
 use hitl_hal::{
@@ -218,12 +218,18 @@ where
     /// Run on the calling thread until the program ends or a trip has been handled. The caller
     /// has applied the OS real-time settings to this thread; the devices go back to it with the
     /// borrows when this returns.
-    pub fn run(mut self, spin: Duration) -> Outcome {
-        let mut clock = Periodic::new(Duration::from_secs_f64(self.dt), spin);
+    pub fn run(self, spin: Duration) -> Outcome {
+        let mut pace = Periodic::new(Duration::from_secs_f64(self.dt), spin);
+        self.run_paced(&mut pace)
+    }
+
+    /// [`Self::run`] on a pace of the caller's: the host's deadlines ([`Periodic`]) or whole
+    /// periods of simulated time ([`crate::rt::Lockstep`]). The ticks are the same either way.
+    pub fn run_paced(mut self, pace: &mut dyn Pace) -> Outcome {
         let outcome = {
             let _in_loop = probe::enter_rt_loop();
             loop {
-                let wake = clock.wait();
+                let wake = pace.wait();
                 if let Flow::Done(outcome) = self.tick(wake) {
                     break outcome;
                 }

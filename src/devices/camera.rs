@@ -261,8 +261,9 @@ pub fn open_camera(
             let config = SimCameraConfig {
                 intrinsics: stream.intrinsics,
                 lens: sim.camera_lens,
-                clock: ctx.clock,
+                clock: ctx.clock.clone(),
                 noise: sim.camera_noise,
+                backlog: sim.render_backlog.clone(),
                 ..Default::default()
             };
             let cam =
@@ -279,7 +280,7 @@ pub fn open_camera(
             return Err(DeviceError::BadInput("--camera sim needs the stub feature".into()))
         }
         CameraSpec::Orbbec(o) => {
-            let cam = open_orbbec(o, ctx.clock)?;
+            let cam = open_orbbec(o, ctx.clock.clone())?;
             let name = format!("Orbbec camera {}", cam.info().serial);
             // Its lifecycle's stop writes the camera's configuration back (so does dropping it).
             RunCamera { dev: Box::new(Kinds::new(cam)), name, delivers_frames: true }

@@ -43,7 +43,7 @@ pub fn open_light(spec: &LightSpec, ctx: &OpenContext<'_>) -> Result<OpenedLight
     }
     let opened = ctx
         .runtime
-        .block_on(spec.open(ctx.clock))
+        .block_on(spec.open(ctx.clock.clone()))
         .map_err(|e| DeviceError::Failed(format!("light {spec}: {e}")))?;
     let Some(serial) = opened else { return Ok(none()) };
     let mut out = none();

@@ -54,6 +54,8 @@ pub struct SimScene<'a> {
     pub camera_noise: hitl_sim_stub::camera::NoiseModel,
     /// The simulated camera's lens, which it announces in its intrinsics.
     pub camera_lens: hitl_hal::Distortion,
+    /// The simulated camera's captures taken and rendered (a simulated clock waits on them).
+    pub render_backlog: &'a hitl_sim_stub::camera::RenderBacklog,
 }
 
 /// `--depth-model`: how the simulated camera's depth is degraded (docs/sim-camera.md).

@@ -22,17 +22,22 @@ pub struct EmbeddedStub {
     camera_noise: hitl_sim_stub::camera::NoiseModel,
     /// The simulated camera's lens (the stub lab's `[camera] distortion`).
     camera_lens: hitl_hal::Distortion,
+    render_backlog: hitl_sim_stub::camera::RenderBacklog,
 }
 
 /// Start the stub on loopback for `lab`, with `target` (in model units) shown at `scale`, the
 /// scene drawn as `scene` says, and `faults` scheduled from its start; its arm powers up at
 /// `initial_q` (`None`: the stub's own power-up pose).
 ///
+/// `simulated`: the stub runs on the run's simulated clock (`--clock sim`): nothing in it keeps
+/// time, the run advances it ([`EmbeddedStub::advance_to`]).
+///
 /// `fifo_priority` is the run loop's SCHED_FIFO priority, if it has one. A box has CPUs of its
 /// own; the embedded stub shares the run's, so its threads (physics, command and report ports)
 /// run just below the loop and its report reader (`fifo_priority - 2`): rendering, perception
 /// and recording on the normal scheduler then cannot make the simulated arm lag its commands,
 /// which the controller would rightly stop as a joint deviation.
+#[allow(clippy::too_many_arguments)]
 pub fn start_stub(
     faults: &[StubFault],
     lab: &LabConfig,
@@ -41,6 +46,7 @@ pub fn start_stub(
     scene: &hitl_sim_stub::mjcf::SceneOptions,
     fifo_priority: Option<i32>,
     initial_q: Option<hitl_hal::Joints>,
+    simulated: bool,
 ) -> Result<EmbeddedStub, DeviceError> {
     let lab_model = LabModel::generated_scene(lab, &stub_target(target, scale), scene)
         .map_err(|e| DeviceError::Failed(format!("stub scene: {e}")))?;
@@ -55,7 +61,7 @@ pub fn start_stub(
         None => hitl_sim_stub::ThreadStart::default(),
     };
     let mut config =
-        StubConfig { faults: faults.to_vec(), thread_start, ..StubConfig::ephemeral() };
+        StubConfig { faults: faults.to_vec(), thread_start, simulated, ..StubConfig::ephemeral() };
     if let Some(q) = initial_q {
         config.initial_q = q;
     }
@@ -71,6 +77,7 @@ pub fn start_stub(
             .camera
             .distortion
             .map_or(hitl_hal::Distortion::NONE, hitl_hal::Distortion::brown_conrady),
+        render_backlog: Default::default(),
     })
 }
 
@@ -146,7 +153,28 @@ impl EmbeddedStub {
             inputs: self.handle.inputs(),
             camera_noise: self.camera_noise,
             camera_lens: self.camera_lens,
+            render_backlog: &self.render_backlog,
         }
+    }
+
+    /// On a simulated clock: step the stub to `t_ns` (physics, faults, reports due by then).
+    pub fn advance_to(&self, t_ns: u64) {
+        self.handle.advance_to(t_ns);
+    }
+
+    /// On a simulated clock, the stub's counters; `None` on the wall clock.
+    pub fn sim(&self) -> Option<&hitl_sim_stub::server::sim_clock::SimState> {
+        self.handle.sim()
+    }
+
+    /// Whether the stub's command port is stalled by a fault now.
+    pub fn replies_stalled(&self) -> bool {
+        self.handle.replies_stalled()
+    }
+
+    /// Whether every capture the simulated camera took has been rendered.
+    pub fn renders_done(&self) -> bool {
+        self.render_backlog.idle()
     }
 
     /// Shut the stub down; where its arm ended.

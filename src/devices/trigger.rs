@@ -26,7 +26,7 @@ pub fn open_trigger(
     }
     let Some(t) = ctx
         .runtime
-        .block_on(trigger.open(ctx.clock))
+        .block_on(trigger.open(ctx.clock.clone()))
         .map_err(|e| DeviceError::Failed(format!("trigger {trigger}: {e}")))?
     else {
         return Ok(());

@@ -1,5 +1,8 @@
 //! A fixed period kept against absolute deadlines: deadline k is `start + k * period`, so a late
 //! wake-up never shifts the ones after it (no drift). Optional sleep-then-spin for tight jitter.
+//!
+//! [`Pace`] is what the loop waits on between ticks: [`Periodic`] on the host's clock, or
+//! [`super::lockstep::Lockstep`] on a simulated one.
 
 use super::os;
 use std::time::Duration;
@@ -15,6 +18,11 @@ pub struct Wake {
     pub late_ns: u64,
     /// The previous tick's work ran past this deadline.
     pub overrun: bool,
+}
+
+/// What the loop waits on before each tick: the next deadline, and how punctual it was.
+pub trait Pace {
+    fn wait(&mut self) -> Wake;
 }
 
 /// The period clock of the real-time thread.
@@ -40,14 +48,16 @@ impl Periodic {
     pub fn period_ns(&self) -> u64 {
         self.period_ns
     }
+}
 
+impl Pace for Periodic {
     /// Wait for the next deadline and say how punctual the wake-up was.
     ///
     /// When the thread comes back after a deadline has passed (its previous tick ran long, or the
     /// OS did not run it), the tick runs at once, marked `overrun`; every deadline missed that way
     /// runs back to back, so tick `k` always stands for `start + k * period`: playback time never
     /// slips behind wall time and no scheduled capture is skipped.
-    pub fn wait(&mut self) -> Wake {
+    fn wait(&mut self) -> Wake {
         self.tick += 1;
         let deadline = self.start_ns + self.tick * self.period_ns;
         let before = os::monotonic_ns();

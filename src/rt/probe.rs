@@ -31,3 +31,20 @@ impl Drop for RtLoopGuard {
         IN_RT_LOOP.with(|f| f.set(false));
     }
 }
+
+/// Lower the flag for the calling thread until the guard drops, then restore it: the simulated
+/// world a lockstep pace advances between ticks is not the tick's work.
+pub fn leave_rt_loop() -> RtLoopPause {
+    RtLoopPause { was: IN_RT_LOOP.with(|f| f.replace(false)) }
+}
+
+/// Restores the flag on drop.
+pub struct RtLoopPause {
+    was: bool,
+}
+
+impl Drop for RtLoopPause {
+    fn drop(&mut self) {
+        IN_RT_LOOP.with(|f| f.set(self.was));
+    }
+}

@@ -3,12 +3,13 @@
 //! loop), the first report, and the box's stop confirmed after a trip.
 
 use super::prepare::violations;
+use super::sim_clock::ReaderProgress;
 use super::RunError;
 use crate::control::stop_supervisor::{supervise_stop, StopConfirmation, StopPolicy};
 use crate::control::tick::Outcome;
 use crate::devices::arm::{ReportConfig, RunArm, RunArmReports};
 use crate::rt::{self, slot::LatestSlot, slot::SlotReader};
-use hitl_hal::{ArmReports, ArmState, Clock, MonotonicClock};
+use hitl_hal::{ArmReports, ArmState, Clock, Error as _, MonotonicClock};
 use hitl_record::{EventKind, SafetyEventMsg, Telemetry};
 use hitl_trajectories::joint_table::JointTable;
 use hitl_trajectories::lab::LabConfig;
@@ -101,19 +102,24 @@ pub(super) fn identify_and_check(
 /// 100 ms until a report shows state 4, or 3 s pass ([`supervise_stop`]); print the result and
 /// record it as a `/safety/event` (kind `other`, detail `box stop confirmed: ...` or `box stop
 /// NOT confirmed: ...`). A completed run has nothing to stop (`None`). `reports` is the session's
-/// tap of the report slot; the reader thread must still be running.
+/// tap of the report slot; the reader thread must still be running. `advance` runs before each
+/// look at the reports: on a simulated clock it moves the world on by one period.
 pub(super) fn confirm_stop(
     arm: &mut RunArm,
     reports: &mut SlotReader<ArmState>,
     outcome: &Outcome,
-    clock: MonotonicClock,
+    clock: &MonotonicClock,
     record: Option<&Telemetry>,
+    advance: &mut dyn FnMut(),
 ) -> Option<StopConfirmation> {
     let Outcome::Tripped { .. } = outcome else {
         return None;
     };
-    let mut latest = || reports.latest().0;
-    let confirmation = supervise_stop(arm, &mut latest, &clock, StopPolicy::default());
+    let mut latest = || {
+        advance();
+        reports.latest().0
+    };
+    let confirmation = supervise_stop(arm, &mut latest, clock, StopPolicy::default());
     let line = confirmation.describe();
     crate::errln!("{line}");
     if let Some(t) = record {
@@ -133,7 +139,9 @@ pub(super) fn spawn_report_reader(
     mut reader: RunArmReports,
     slot: LatestSlot<ArmState>,
     stop: Arc<AtomicBool>,
+    progress: Arc<ReaderProgress>,
     fifo_priority: Option<i32>,
+    simulated: bool,
 ) -> std::io::Result<std::thread::JoinHandle<()>> {
     std::thread::Builder::new().name("hitl-reports".into()).spawn(move || {
         if let Some(p) = fifo_priority {
@@ -141,20 +149,30 @@ pub(super) fn spawn_report_reader(
         }
         while !stop.load(Ordering::Acquire) {
             match reader.next_report() {
-                Ok(state) => slot.publish(state),
+                Ok(state) => {
+                    slot.publish(state);
+                    progress.published.fetch_add(1, Ordering::AcqRel);
+                }
+                // On a simulated clock a read timeout is host time passing while simulated
+                // time stands still (a long render or estimate), not a silent box.
+                Err(e) if simulated && e.kind() == hitl_hal::ErrorKind::Timeout => continue,
                 Err(_) => break,
             }
         }
+        progress.ended.store(true, Ordering::Release);
     })
 }
 
-/// Wait for the first arm report (the arm is alive and we know where it is).
+/// Wait for the first arm report (the arm is alive and we know where it is); `prime` runs before
+/// each look (on a simulated clock it has the stub write the reports due now).
 pub(super) fn first_report(
     reader: &mut rt::slot::SlotReader<ArmState>,
     timeout: Duration,
+    prime: impl Fn(),
 ) -> Option<ArmState> {
     let deadline = Instant::now() + timeout;
     while Instant::now() < deadline {
+        prime();
         if let (Some(state), true) = reader.latest() {
             return Some(state);
         }

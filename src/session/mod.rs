@@ -13,7 +13,8 @@
 //! - [`devices`]: the target scene, the recorder, late frames (the devices themselves are opened
 //!   by `crate::devices`, which is the only place that names drivers);
 //! - [`operator`]: what Ctrl-C does;
-//! - [`progress`]: the operator's progress line, read from the loop's status atomics.
+//! - [`progress`]: the operator's progress line, read from the loop's status atomics;
+//! - [`sim_clock`]: `--clock sim`, the simulated world the loop advances in lockstep.
 //!
 //! The run owns one tokio runtime for its whole life: the serial drivers' I/O tasks and the
 //! perception forwarder live on it, from opening until the devices are stopped after the loop.
@@ -23,6 +24,9 @@ mod devices;
 mod operator;
 mod prepare;
 mod progress;
+mod sim_clock;
+
+pub use sim_clock::{ClockChoice, SimStats};
 
 use crate::capture::intake::{Intake, IntakeMask, IntakeOutputs, IntakeStats};
 use crate::capture::mask::{MaskDrawer, MaskSource};
@@ -50,7 +54,7 @@ use crate::telemetry::LoopStatus;
 use arm_link::{connect_reports, first_report, resolve, spawn_report_reader};
 use devices::{collect_late_frames, start_live, start_recorder, target_scene, TargetScene};
 use hitl_hal::JointState;
-use hitl_hal::{Arm, ArmState, Joints, MonotonicClock};
+use hitl_hal::{Arm, ArmState, Joints, MonotonicClock, SimTime};
 use hitl_perception::{backend_from_spec, spawn_worker, BackendSpec, PoseResult, ReregisterPolicy};
 use hitl_record::{
     ChunkCompression, EventKind, PoseStamped, RecorderHandle, SafetyEventMsg, Telemetry,
@@ -148,6 +152,8 @@ pub struct RunRequest {
     /// `--closed-loop` (with `--corridor-m`): correct the playback on the pose estimates
     /// (docs/closed-loop.md); `None`: open loop.
     pub closed_loop: Option<ClosedLoopConfig>,
+    /// The host's clock, or simulated time in lockstep with the embedded stub (`--clock`).
+    pub clock: ClockChoice,
 }
 
 /// A run that could not start (nothing moved), or a device that failed before the loop.
@@ -209,6 +215,8 @@ pub struct RunReport {
     pub live: Option<hitl_record::LiveSummary>,
     /// What the closed loop did (`--closed-loop`).
     pub closed_loop: Option<NavigatorSummary>,
+    /// On `--clock sim`: simulated and host time the loop took.
+    pub sim: Option<SimStats>,
 }
 
 impl RunReport {
@@ -259,6 +267,9 @@ impl RunReport {
             self.overruns,
             self.rt.summary()
         );
+        if let Some(sim) = &self.sim {
+            s.push_str(&format!("\n{}", sim.describe()));
+        }
         if self.intake.frames > 0 {
             s.push_str(&format!("\n{}", self.intake.mask.describe()));
             s.push_str(&format!(
@@ -306,24 +317,28 @@ pub fn run(req: RunRequest) -> Result<RunReport, RunError> {
 
     // 1. Before anything is opened: the trajectory (parking: the rest pose alone), the target, the
     // estimator choice.
+    check_clock_choice(&req)?;
     let (traj, table) = if req.park { park_target(&req)? } else { prepare(&req)? };
     let scene = target_scene(&req, &traj)?;
     check_perception_choice(&req)?;
     let plan_frame = closed_loop_frame(&req, &traj)?;
-    let clock = MonotonicClock::new();
+    let clock = match req.clock {
+        ClockChoice::Realtime => MonotonicClock::new(),
+        ClockChoice::Sim => MonotonicClock::simulated(SimTime::new()),
+    };
     let runtime = io_runtime()?;
 
     // 2. The arm's side: the embedded stub, or the real box's address.
     let target = start_arm_target(&req, &scene, &traj, &table)?;
 
     // 3. Devices besides the arm, opened, configured and started before the arm is enabled.
-    let mut devices = open_and_start_devices(&req, &target, runtime.handle(), clock)?;
+    let mut devices = open_and_start_devices(&req, &target, runtime.handle(), clock.clone())?;
 
     // 4. The capture path: recorder, perception worker, frame intake.
     let capture = CapturePath::start(&req, &traj, &scene, &runtime)?;
 
     // 5. The arm: connect, identify and preflight against its joint table, read, enable.
-    let mut link = connect_arm(&req, &target, &traj, &table, clock)?;
+    let mut link = connect_arm(&req, &target, &traj, &table, clock.clone())?;
 
     // 6. The program: the approach from where the arm stands, the trajectory, the retreat to rest;
     // each planned move is recorded with the run.
@@ -356,18 +371,23 @@ pub fn run(req: RunRequest) -> Result<RunReport, RunError> {
         &mut devices,
         &capture,
         operator_stop,
-        clock,
+        &clock,
+        &target,
         plan_frame,
     )?;
 
-    // 7b. A tripped run: the box's stop repeated until a report shows it (off the loop thread).
+    // 7b. A tripped run: the box's stop repeated until a report shows it (off the loop thread;
+    // on a simulated clock, each look at the reports moves the world on by one period).
+    let mut after_loop = target.after_loop(&link, &capture, &clock, table.dt);
     let box_stop = arm_link::confirm_stop(
         &mut link.arm,
         &mut link.stop_reports,
         &played.outcome,
-        clock,
+        &clock,
         capture.record.as_ref(),
+        &mut after_loop,
     );
+    drop(after_loop);
 
     // 8. After the loop: the report reader, the devices, the capture path, the stub.
     link.close();
@@ -381,6 +401,24 @@ pub fn run(req: RunRequest) -> Result<RunReport, RunError> {
     let mut report = report(&req, &program, played, closed, stub_final_q, device_faults);
     report.box_stop = box_stop;
     Ok(report)
+}
+
+/// `--clock sim` is only for the embedded stub: a real box keeps its own time, which no run can
+/// simulate. Refused before anything is opened or connected.
+fn check_clock_choice(req: &RunRequest) -> Result<(), RunError> {
+    if req.clock != ClockChoice::Sim {
+        return Ok(());
+    }
+    match &req.target {
+        ArmTarget::Remote { host } => Err(RunError::BadInput(format!(
+            "--clock sim runs on the embedded stub only; a real arm ({host}) keeps real time: \
+             use --clock realtime with --arm"
+        ))),
+        ArmTarget::Stub { .. } if cfg!(not(feature = "stub")) => Err(RunError::BadInput(
+            "--clock sim needs the embedded stub, which this build does not have".into(),
+        )),
+        ArmTarget::Stub { .. } => Ok(()),
+    }
 }
 
 /// `--reregister-*` only make sense with a pose estimator; the simulator's mask only with the
@@ -454,6 +492,51 @@ impl ArmTargetLink {
     fn close(self) -> Option<Joints> {
         self.stub.map(EmbeddedStub::close)
     }
+
+    /// The embedded stub, when it runs on the simulated clock.
+    #[cfg(feature = "stub")]
+    fn sim_stub(&self) -> Option<&EmbeddedStub> {
+        self.stub.as_ref().filter(|s| s.sim().is_some())
+    }
+
+    /// Before the loop, on a simulated clock: write the reports due now (simulated time stands
+    /// still until the loop starts). Nothing on the host's clock.
+    fn prime(&self) {
+        #[cfg(feature = "stub")]
+        if let Some(stub) = self.sim_stub() {
+            stub.advance_to(0);
+        }
+    }
+
+    /// After the loop: what moves the world on by one period each time it is called (on a
+    /// simulated clock; nothing on the host's, whose time moves by itself).
+    fn after_loop<'a>(
+        &'a self,
+        link: &ArmLink,
+        capture: &CapturePath,
+        clock: &MonotonicClock,
+        dt: f64,
+    ) -> Box<dyn FnMut() + 'a> {
+        #[cfg(feature = "stub")]
+        if let (Some(stub), Some(time)) = (self.sim_stub(), clock.sim_time().cloned()) {
+            let watched = link.watched(capture);
+            let stalls = std::sync::atomic::AtomicU64::new(0);
+            let period_ns = (dt * 1e9).round() as u64;
+            return Box::new(move || {
+                let t = time.now_ns() + period_ns;
+                time.advance_to(t);
+                let mut world = sim_clock::SimWorld {
+                    stub,
+                    watched: &watched,
+                    stop_planned: &|| true,
+                    stalls: &stalls,
+                };
+                rt::World::advance_to(&mut world, t);
+            });
+        }
+        let _ = (link, capture, clock, dt);
+        Box::new(|| {})
+    }
 }
 
 fn start_arm_target(
@@ -480,6 +563,7 @@ fn start_arm_target(
                 &look,
                 req.rt.fifo_priority,
                 req.stub_start_q,
+                req.clock == ClockChoice::Sim,
             )?
             .with_depth_model(req.depth_model, 0);
             stub.sun_track()
@@ -681,6 +765,8 @@ struct ArmLink {
     reports: Option<SlotReader<ArmState>>,
     reader_stop: Arc<AtomicBool>,
     reader_thread: Option<std::thread::JoinHandle<()>>,
+    /// How far the report reader has read (a simulated clock waits on it).
+    reader_progress: Arc<sim_clock::ReaderProgress>,
     first: ArmState,
     /// The lab as this arm allows it (its joint table).
     lab: LabConfig,
@@ -689,6 +775,16 @@ struct ArmLink {
 }
 
 impl ArmLink {
+    /// What a simulated clock's lockstep waits on.
+    fn watched(&self, capture: &CapturePath) -> sim_clock::Watched {
+        sim_clock::Watched {
+            commands_written: self.arm.written_counter(),
+            reader: Arc::clone(&self.reader_progress),
+            intake: Arc::clone(&capture.queues),
+            perception: capture.perception.as_ref().map(|p| Arc::clone(&p.stats)),
+        }
+    }
+
     /// Stop the report reader.
     fn close(&mut self) {
         self.reader_stop.store(true, Ordering::Release);
@@ -731,10 +827,17 @@ fn connect_arm(
     )?;
     let (slot, mut reports) = LatestSlot::new();
     let reader_stop = Arc::new(AtomicBool::new(false));
-    let reader_thread =
-        spawn_report_reader(reader, slot, Arc::clone(&reader_stop), req.rt.fifo_priority)
-            .map_err(|e| RunError::Device(format!("report reader thread: {e}")))?;
-    let first = first_report(&mut reports, Duration::from_secs(2))
+    let reader_progress = Arc::new(sim_clock::ReaderProgress::default());
+    let reader_thread = spawn_report_reader(
+        reader,
+        slot,
+        Arc::clone(&reader_stop),
+        Arc::clone(&reader_progress),
+        req.rt.fifo_priority,
+        req.clock == ClockChoice::Sim,
+    )
+    .map_err(|e| RunError::Device(format!("report reader thread: {e}")))?;
+    let first = first_report(&mut reports, Duration::from_secs(2), || target.prime())
         .ok_or_else(|| RunError::Device("the arm sent no report within 2 s".into()))?;
     arm.enable_servo().map_err(|e| RunError::Device(format!("enabling the arm: {e}")))?;
     Ok(ArmLink {
@@ -743,6 +846,7 @@ fn connect_arm(
         reports: Some(reports),
         reader_stop,
         reader_thread: Some(reader_thread),
+        reader_progress,
         first,
         lab: arm_lab,
     })
@@ -835,6 +939,8 @@ fn build_park_program(
 
 /// What the loop left.
 struct Played {
+    /// On a simulated clock: simulated and host time the loop took.
+    sim: Option<SimStats>,
     outcome: Outcome,
     rt: rt::RtReport,
     status: Arc<LoopStatus>,
@@ -853,7 +959,8 @@ fn play(
     devices: &mut RunDevices,
     capture: &CapturePath,
     operator_stop: Arc<AtomicBool>,
-    clock: MonotonicClock,
+    clock: &MonotonicClock,
+    target: &ArmTargetLink,
     plan_frame: Option<PlanFrame>,
 ) -> Result<Played, RunError> {
     let health = Health {
@@ -881,11 +988,29 @@ fn play(
         status: Arc::clone(&status),
         health,
         stop,
-        clock,
+        clock: clock.clone(),
     };
     let interlocks = Interlocks::new(Thresholds::from_lab(&req.lab));
-    let (correction, navigator) =
-        start_navigator(req, program, table, &link.lab, capture, &status, clock, plan_frame)?;
+    let (correction, navigator) = start_navigator(
+        req,
+        program,
+        table,
+        &link.lab,
+        capture,
+        &status,
+        clock.clone(),
+        plan_frame,
+    )?;
+    #[cfg(feature = "stub")]
+    let sim = target.sim_stub().zip(clock.sim_time().cloned());
+    #[cfg(feature = "stub")]
+    let (watched, stalls) = (link.watched(capture), std::sync::atomic::AtomicU64::new(0));
+    #[cfg(not(feature = "stub"))]
+    let _ = target;
+    let stop_planned = || planner.settled();
+    #[cfg(feature = "stub")]
+    let (sim_time, stalls) = (sim.as_ref().map(|(_, t)| t.clone()), &stalls);
+    let wall = std::time::Instant::now();
     let rt_options = req.rt;
     let rate = table.rate_hz;
     let start_q = link.first.q;
@@ -905,6 +1030,21 @@ fn play(
                 let control =
                     ControlLoop::new(program, loop_devices, io, interlocks, rate, &start_q)
                         .with_correction(correction);
+                #[cfg(feature = "stub")]
+                let outcome = match sim {
+                    Some((stub, time)) => {
+                        let world = sim_clock::SimWorld {
+                            stub,
+                            watched: &watched,
+                            stop_planned: &stop_planned,
+                            stalls,
+                        };
+                        let period_ns = (1e9 / rate).round() as u64;
+                        control.run_paced(&mut rt::Lockstep::new(time, period_ns, world))
+                    }
+                    None => control.run(rt_options.spin),
+                };
+                #[cfg(not(feature = "stub"))]
                 let outcome = control.run(rt_options.spin);
                 let _ = arm.flush_servo_replies();
                 (outcome, rt_report)
@@ -913,6 +1053,7 @@ fn play(
         progress::follow(&status, program, req.plain_progress);
         rt_thread.join().map_err(|_| RunError::Device("the real-time thread panicked".into()))
     })?;
+    let wall_s = wall.elapsed().as_secs_f64();
     drop(planner);
     let closed_loop = navigator.map(|n| {
         let summary = n.finish();
@@ -922,7 +1063,16 @@ fn play(
         summary
     });
     let captures = status.captures.load(Ordering::Acquire);
-    Ok(Played { outcome, rt: rt_report, status, captures, closed_loop })
+    #[cfg(feature = "stub")]
+    let sim = sim_time.map(|time| SimStats {
+        sim_s: time.now_ns() as f64 * 1e-9,
+        wall_s,
+        stalls: stalls.load(Ordering::Relaxed),
+    });
+    #[cfg(not(feature = "stub"))]
+    let sim = None;
+    let _ = wall_s;
+    Ok(Played { outcome, rt: rt_report, status, captures, closed_loop, sim })
 }
 
 /// `--closed-loop`: the tick's correction stage and the navigator that feeds it (open loop: a
@@ -1052,5 +1202,6 @@ fn report(
         box_stop: None,
         live: closed.live,
         closed_loop: played.closed_loop,
+        sim: played.sim,
     }
 }

@@ -22,6 +22,8 @@ use hitl_hal::{Arm, ErrorType, Joints, DOF};
 use socket2::{Domain, Protocol, SockRef, Socket, TcpKeepalive, Type};
 use std::io::{self, Write};
 use std::net::{SocketAddr, ToSocketAddrs};
+use std::sync::atomic::{AtomicU64, Ordering};
+use std::sync::Arc;
 use std::time::{Duration, Instant};
 
 /// The box's command port.
@@ -103,6 +105,8 @@ pub struct XarmClient {
     /// A fault seen in a servo_j reply, reported by the next `servo_joint`.
     servo_fault: Option<StateBits>,
     servo_sent: u64,
+    /// Request frames written, shared with [`XarmClient::written_counter`]'s readers.
+    written: Arc<AtomicU64>,
 }
 
 fn cmd_frame_len(buf: &[u8]) -> Result<Option<usize>, codec::CodecError> {
@@ -150,6 +154,7 @@ impl XarmClient {
             last_state: StateBits(0),
             servo_fault: None,
             servo_sent: 0,
+            written: Arc::new(AtomicU64::new(0)),
         })
     }
 
@@ -166,6 +171,12 @@ impl XarmClient {
     /// servo_j setpoints written so far.
     pub fn servo_sent(&self) -> u64 {
         self.servo_sent
+    }
+
+    /// The count of request frames this client has written, readable from another thread (a
+    /// simulated box in lockstep waits until it has answered as many as were written).
+    pub fn written_counter(&self) -> Arc<AtomicU64> {
+        Arc::clone(&self.written)
     }
 
     /// Replies not waited for (servo_j setpoints, stop requests) not yet received.
@@ -321,6 +332,7 @@ impl XarmClient {
         let t = self.take_transaction();
         let n = encode_request(&mut buf, t, PROTOCOL_PRIVATE, register, params)?;
         (&self.sock).write_all(&buf[..n])?;
+        self.written.fetch_add(1, Ordering::Relaxed);
         let reply = self.wait_reply_for(t, register, timeout)?;
         if reply.state.invalid() {
             return Err(XarmError::Invalid { register: reg::name(register) });
@@ -370,6 +382,7 @@ impl XarmClient {
             &[arm_state::STOPPED],
         )?;
         (&self.sock).write_all(&self.stop_buf[..n])?;
+        self.written.fetch_add(1, Ordering::Relaxed);
         self.outstanding += 1;
         drained
     }
@@ -396,6 +409,7 @@ impl XarmClient {
         let t = self.take_transaction();
         codec::encode_joint_motion(&mut buf, t, reg::MOVE_JOINT, q, speed, acc, 0.0);
         (&self.sock).write_all(&buf)?;
+        self.written.fetch_add(1, Ordering::Relaxed);
         let r = self.wait_reply(t, reg::MOVE_JOINT)?;
         check_motion_reply(reg::MOVE_JOINT, r.state)?;
         Ok(r.state)
@@ -406,6 +420,7 @@ impl XarmClient {
         let t = self.take_transaction();
         encode_servo_j(&mut self.servo_buf, t, q);
         (&self.sock).write_all(&self.servo_buf)?;
+        self.written.fetch_add(1, Ordering::Relaxed);
         self.servo_sent += 1;
         let r = self.wait_reply(t, reg::MOVE_SERVOJ)?;
         check_motion_reply(reg::MOVE_SERVOJ, r.state)?;
@@ -428,6 +443,7 @@ impl XarmClient {
         let t = self.take_transaction();
         encode_servo_j(&mut self.servo_buf, t, q);
         (&self.sock).write_all(&self.servo_buf)?;
+        self.written.fetch_add(1, Ordering::Relaxed);
         self.outstanding += 1;
         self.servo_sent += 1;
         Ok(())

@@ -23,7 +23,7 @@ use std::time::Duration;
 const RX_CAP: usize = 2 * MAX_REPORT_LEN;
 
 /// Report-reader settings.
-#[derive(Debug, Clone, Copy)]
+#[derive(Debug, Clone)]
 pub struct ReportConfig {
     /// Which report to follow (default 30003, the real report).
     pub kind: ReportKind,

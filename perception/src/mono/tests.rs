@@ -69,7 +69,7 @@ fn is_lost_in_the_dark() {
     let mut frame = render(&mesh, &poses[0], &k, 0);
     // A thirty-second of the light: the flat-shaded faces (40-240) fall to 1-7, under the dark
     // level.
-    for c in &mut frame.color {
+    for c in std::sync::Arc::make_mut(&mut frame.color).iter_mut() {
         *c /= 32;
     }
     let mut t = MonoTracker::new(&mesh, MonoConfig::default()).expect("tracker");
@@ -83,7 +83,7 @@ fn refuses_a_frame_without_colour() {
     let mesh = target();
     let (k, poses) = views(1);
     let mut frame = render(&mesh, &poses[0], &k, 0);
-    frame.color.clear();
+    frame.color = Vec::new().into();
     let mut t = MonoTracker::new(&mesh, MonoConfig::default()).expect("tracker");
     let e = t.estimate(&frame).expect_err("no colour");
     assert!(e.to_string().contains("colour"), "{e}");

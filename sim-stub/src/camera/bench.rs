@@ -151,7 +151,7 @@ pub fn bench_render(under_load: Option<UnderLoad<'_>>) -> serde_json::Value {
     let arm = SharedArmState::new(ArmSample { q, sim_time_s: 0.0 });
     let config = SimCameraConfig {
         intrinsics: Preset::Wfov.at(320, 256),
-        clock,
+        clock: clock.clone(),
         ..SimCameraConfig::default()
     };
     let mut latencies_ms = Vec::new();

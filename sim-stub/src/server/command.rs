@@ -45,7 +45,19 @@ pub fn serve(shared: Arc<Shared>, listener: TcpListener) {
     }
 }
 
-fn connection(shared: Arc<Shared>, mut stream: TcpStream) {
+fn connection(shared: Arc<Shared>, stream: TcpStream) {
+    // On a simulated clock the host counts the open command connections: with none, nothing it
+    // writes will be answered, and it does not wait for answers.
+    if let Some(sim) = &shared.sim {
+        sim.command_connections.fetch_add(1, Ordering::AcqRel);
+    }
+    serve_connection(&shared, stream);
+    if let Some(sim) = &shared.sim {
+        sim.command_connections.fetch_sub(1, Ordering::AcqRel);
+    }
+}
+
+fn serve_connection(shared: &Shared, mut stream: TcpStream) {
     let epoch = shared.drop_epoch.load(Ordering::SeqCst);
     if stream.set_nodelay(true).is_err() || stream.set_read_timeout(Some(POLL)).is_err() {
         return;
@@ -65,7 +77,7 @@ fn connection(shared: Arc<Shared>, mut stream: TcpStream) {
         }
         // Answer only here, after the stall check: bytes that a read blocked since before the
         // stall brings in are held until the stall ends, never answered during it.
-        match answer_all(&shared, &mut rx, &mut stream, &mut out) {
+        match answer_all(shared, &mut rx, &mut stream, &mut out) {
             Ok(()) => {}
             Err(ConnError::Codec) => {
                 shared.counters.bad_frames.fetch_add(1, Ordering::Relaxed);
@@ -120,7 +132,10 @@ fn answer_all(
         let now_s = shared.pace_command();
         let n = match req.protocol {
             // The SDK's keep-alive frames need no answer.
-            PROTOCOL_HEARTBEAT => continue,
+            PROTOCOL_HEARTBEAT => {
+                answered(shared);
+                continue;
+            }
             // Standard Modbus-TCP (the box's register map) is not simulated: exception 01.
             PROTOCOL_STANDARD => {
                 // Standard exception reply: unit id, function | 0x80, exception code 01.
@@ -142,6 +157,14 @@ fn answer_all(
             }
         };
         stream.write_all(&out[..n])?;
+        answered(shared);
     }
     Ok(())
+}
+
+/// On a simulated clock: one more request answered (the host waits on the count).
+fn answered(shared: &Shared) {
+    if let Some(sim) = &shared.sim {
+        sim.commands_answered.fetch_add(1, Ordering::AcqRel);
+    }
 }

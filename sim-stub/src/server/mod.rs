@@ -5,6 +5,7 @@
 //! - [`command`]: the command port (502): private Modbus-TCP requests and replies;
 //! - [`reports`]: the report ports (30000-30003) at a real box's rates;
 //! - [`stepper`]: the physics thread (fixed step against absolute deadlines) and fault schedule;
+//! - [`sim_clock`]: the same box on a simulated clock, advanced by the host instead of threads;
 //! - [`bench`]: protocol benchmarks against a running stub.
 //!
 //! Threads share one [`Shared`] value: the box behind a mutex (held for one request or one physics
@@ -15,6 +16,7 @@ pub mod arm_box;
 pub mod bench;
 pub mod command;
 pub mod reports;
+pub mod sim_clock;
 pub mod stepper;
 
 use crate::faults::{Fault, FaultKind, SimInputs, SimInputsReader};
@@ -69,6 +71,9 @@ pub struct StubConfig {
     pub physics_dt: f64,
     /// Runs first on every thread the stub starts (physics, accept loops, connections).
     pub thread_start: ThreadStart,
+    /// On a simulated clock: no physics thread, no report pacing; the host advances the box
+    /// with [`StubHandle::advance_to`] ([`sim_clock`]). Commands are not paced either.
+    pub simulated: bool,
 }
 
 /// What every thread of the stub runs first. A control box has CPUs of its own; a stub embedded
@@ -123,6 +128,7 @@ impl Default for StubConfig {
             max_command_rate_hz: Some(BOX_COMMAND_RATE_HZ),
             physics_dt: 0.002,
             thread_start: ThreadStart::default(),
+            simulated: false,
         }
     }
 }
@@ -218,6 +224,8 @@ pub struct Shared {
     pub physics_dt: f64,
     pub pacer: CommandPacer,
     pub thread_start: ThreadStart,
+    /// The simulated clock's state, when the stub runs on one.
+    pub sim: Option<sim_clock::SimState>,
 }
 
 impl Shared {
@@ -226,8 +234,12 @@ impl Shared {
         self.arm.lock().unwrap_or_else(|e| e.into_inner())
     }
 
+    /// The box's time, ns since start: wall time, or on a simulated clock the simulated time.
     pub fn elapsed_ns(&self) -> u64 {
-        u64::try_from(self.started.elapsed().as_nanos()).unwrap_or(u64::MAX)
+        match &self.sim {
+            Some(sim) => sim.now_ns.load(Ordering::Acquire),
+            None => u64::try_from(self.started.elapsed().as_nanos()).unwrap_or(u64::MAX),
+        }
     }
 
     /// Wait for this command's slot (no faster than a box handles commands); returns the time
@@ -236,7 +248,7 @@ impl Shared {
         let now = self.elapsed_ns();
         let c = &self.counters;
         c.commands.fetch_add(1, Ordering::Relaxed);
-        if self.pacer.period_ns == 0 {
+        if self.pacer.period_ns == 0 || self.sim.is_some() {
             return now as f64 * 1e-9;
         }
         let slot = self.pacer.reserve(now);
@@ -303,6 +315,8 @@ pub struct StubHandle {
     cmd_addr: SocketAddr,
     report_addrs: Vec<(ReportKind, SocketAddr)>,
     threads: Vec<JoinHandle<()>>,
+    /// On a simulated clock: what advances the box.
+    driver: Option<Mutex<sim_clock::SimDriver>>,
 }
 
 fn bind(addr: SocketAddr, what: &'static str) -> Result<TcpListener, StubError> {
@@ -351,6 +365,7 @@ impl Stub {
             physics_dt: config.physics_dt,
             pacer: CommandPacer::new(config.max_command_rate_hz),
             thread_start: config.thread_start.clone(),
+            sim: config.simulated.then(sim_clock::SimState::new),
         });
         let cmd_addr = cmd.local_addr()?;
         let mut report_addrs = Vec::new();
@@ -358,7 +373,12 @@ impl Stub {
         let s = shared.clone();
         let faults = config.faults.clone();
         let start = &config.thread_start;
-        threads.push(start.spawn("hitl-stub-physics", move || stepper::run(s, faults))?);
+        let driver = if config.simulated {
+            Some(Mutex::new(sim_clock::SimDriver::new(faults)))
+        } else {
+            threads.push(start.spawn("hitl-stub-physics", move || stepper::run(s, faults))?);
+            None
+        };
         let s = shared.clone();
         threads.push(start.spawn("hitl-stub-cmd", move || command::serve(s, cmd))?);
         for (kind, l) in report_listeners {
@@ -366,7 +386,7 @@ impl Stub {
             let s = shared.clone();
             threads.push(start.spawn("hitl-stub-report", move || reports::serve(s, l, kind))?);
         }
-        Ok(StubHandle { shared, cmd_addr, report_addrs, threads })
+        Ok(StubHandle { shared, cmd_addr, report_addrs, threads, driver })
     }
 }
 
@@ -449,6 +469,24 @@ impl StubHandle {
             wall_s: self.shared.started.elapsed().as_secs_f64(),
             mean_step_s: if steps > 0 { busy / steps as f64 } else { 0.0 },
         }
+    }
+
+    /// On a simulated clock: step the box to `t_ns` of simulated time (faults, reports and
+    /// physics due by then); does nothing on the wall clock.
+    pub fn advance_to(&self, t_ns: u64) {
+        if let (Some(driver), Some(sim)) = (&self.driver, &self.shared.sim) {
+            driver.lock().unwrap_or_else(|e| e.into_inner()).advance_to(&self.shared, sim, t_ns);
+        }
+    }
+
+    /// On a simulated clock, its state (counters the host waits on); `None` on the wall clock.
+    pub fn sim(&self) -> Option<&sim_clock::SimState> {
+        self.shared.sim.as_ref()
+    }
+
+    /// Whether the command port is stalled by a fault now.
+    pub fn replies_stalled(&self) -> bool {
+        self.shared.replies_stalled()
     }
 
     /// Stop every thread and close every socket.

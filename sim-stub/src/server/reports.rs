@@ -39,6 +39,11 @@ fn connection(shared: Arc<Shared>, mut stream: TcpStream, kind: ReportKind) {
     let epoch = shared.drop_epoch.load(Ordering::SeqCst);
     let _ = stream.set_nodelay(true);
     let _ = stream.set_write_timeout(Some(Duration::from_secs(1)));
+    if let Some(sim) = &shared.sim {
+        // On a simulated clock the host's advances write the reports (server::sim_clock).
+        sim.add_report_connection(stream, kind, epoch);
+        return;
+    }
     let period = Duration::from_secs_f64(1.0 / kind.rate_hz());
     let mut buf = [0u8; MAX_REPORT_LEN];
     let mut next = Instant::now();

@@ -26,6 +26,7 @@ const RUN_KEYS: &[&str] = &[
     "perception",
     "reregister_every",
     "rt_priority",
+    "clock",
 ];
 
 /// `hitl plan`'s flags, parsed as the subcommand parses them.

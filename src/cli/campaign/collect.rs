@@ -272,6 +272,7 @@ pub fn csv(rows: &[Row]) -> String {
             "mesh_faces_used",
             "symmetry",
             "wall_s",
+            "real_time_factor",
             "failed_stage",
             "exit_code",
             "problem",
@@ -303,6 +304,7 @@ pub fn csv(rows: &[Row]) -> String {
         let symmetry = r.metrics.as_ref().and_then(|m| m.get("symmetry")).and_then(Value::as_str);
         cells.push(symmetry.unwrap_or_default().to_string());
         cells.push(res("wall_s"));
+        cells.push(res("real_time_factor"));
         cells.push(res("failed_stage"));
         cells.push(res("exit_code"));
         cells.push(r.problem.clone().unwrap_or_default());

@@ -79,6 +79,9 @@ const KEYS: &[KeyDef] = &[
     KeyDef { name: "reregister_every", kind: Kind::Count, default: None, matrix: true },
     KeyDef { name: "config", kind: Kind::File, default: None, matrix: false },
     KeyDef { name: "rt_priority", kind: Kind::Priority, default: None, matrix: false },
+    // The run's clock (`hitl run --clock`): simulated by default, so a case repeats exactly and
+    // plays as fast as the machine allows; `realtime` still available (docs/sim-clock.md).
+    KeyDef { name: "clock", kind: Kind::Text, default: Some(|| json!("sim")), matrix: false },
 ];
 
 /// The highest SCHED_FIFO priority Linux grants (`hitl run` clamps its `--rt-priority` to 1-99

@@ -252,10 +252,13 @@ fn describe(case: &Case, outcome: &Outcome, secs: f64, out: &Path) -> String {
             let r = store::read_result(out, &case.id).unwrap_or(Value::Null);
             let m = |k: &str| r.pointer(&format!("/metrics/{k}")).and_then(Value::as_f64);
             format!(
-                "{head}: ok in {secs:.1} s, {} frames, mean e_t {} m, mean e_r {} deg",
+                "{head}: ok in {secs:.1} s, {} frames, mean e_t {} m, mean e_r {} deg{}",
                 r.pointer("/metrics/frames").cloned().unwrap_or(Value::Null),
                 m("mean_et_m").map_or("-".into(), |x| format!("{x:.4}")),
                 m("mean_er_deg").map_or("-".into(), |x| format!("{x:.2}")),
+                r.get("real_time_factor")
+                    .and_then(Value::as_f64)
+                    .map_or(String::new(), |f| format!(", run at {f:.2}x real time")),
             )
         }
         Outcome::Failed { stage, code } => format!(
@@ -431,6 +434,15 @@ pub(super) fn case_sun(case: &Case) -> Result<phase::CaseSun, String> {
     phase::case_sun(preset, range, arc, window("phase_angle_deg")?)
 }
 
+/// The real-time factor a simulated-clock run printed in its log (`simulated clock: S s simulated
+/// in W s (Fx real time)`); `None` on the host's clock or without the log.
+fn real_time_factor(log: &Path) -> Option<f64> {
+    let text = std::fs::read_to_string(log).ok()?;
+    let line = text.lines().rev().find(|l| l.starts_with("simulated clock:"))?;
+    let (_, rest) = line.rsplit_once('(')?;
+    rest.split_once("x real time")?.0.trim().parse().ok()
+}
+
 /// `hitl run` arguments of a case.
 pub(super) fn run_args(case: &Case, plan: &Path, record: &Path) -> Vec<String> {
     let mut a = vec![
@@ -449,6 +461,8 @@ pub(super) fn run_args(case: &Case, plan: &Path, record: &Path) -> Vec<String> {
         s("--target-model"),
         s(case.text("target").unwrap_or("asymmetric")),
         s("--plain"),
+        s("--clock"),
+        s(case.text("clock").unwrap_or("sim")),
     ];
     if let Some(size) = case.text("camera_size") {
         a.extend([s("--camera-size"), s(size)]);
@@ -577,6 +591,8 @@ fn play_stages(
         }
     }
     let _ = std::fs::remove_file(dir.join("run-failed.mcap"));
+    result["real_time_factor"] =
+        real_time_factor(&dir.join("run.log")).map_or(Value::Null, |f| json!(f));
 
     // 3. eval: the run's own estimates (ground-truth mesh), then the decimated mesh if asked.
     let rec_s = s(rec.display());
@@ -604,4 +620,41 @@ fn play_stages(
     result["metrics"] = metrics;
     result["baseline"] = gt;
     Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::cli::campaign::manifest::parse;
+
+    fn clock_of(manifest: &str) -> String {
+        let m = parse(manifest, Path::new("/m"), "m").expect("manifest");
+        let case = m.cases().next().expect("a case");
+        let a = run_args(&case, Path::new("p.npz"), Path::new("r.mcap"));
+        let i = a.iter().position(|x| x == "--clock").expect("--clock passed");
+        a[i + 1].clone()
+    }
+
+    #[test]
+    fn a_case_runs_on_the_simulated_clock_unless_its_manifest_says_realtime() {
+        assert_eq!(clock_of("[run]\nrange_m = 5\n"), "sim");
+        assert_eq!(clock_of("[run]\nrange_m = 5\nclock = \"realtime\"\n"), "realtime");
+        assert!(parse("[run]\nclock = \"wall\"\n", Path::new("/m"), "m").is_err());
+        assert!(parse("[run]\n[matrix]\nclock = [\"sim\", \"realtime\"]\n", Path::new("/m"), "m")
+            .is_err());
+    }
+
+    #[test]
+    fn the_real_time_factor_is_read_from_the_run_summary() {
+        let dir = tempfile::tempdir().expect("tempdir");
+        let log = dir.path().join("run.log");
+        std::fs::write(
+            &log,
+            "completed\nsimulated clock: 12.000 s simulated in 2.000 s (6.00x real time)\n",
+        )
+        .expect("write");
+        assert_eq!(real_time_factor(&log), Some(6.0));
+        std::fs::write(&log, "completed\ncaptures 3\n").expect("write");
+        assert_eq!(real_time_factor(&log), None);
+    }
 }

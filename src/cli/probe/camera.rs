@@ -98,10 +98,10 @@ fn test_fire_camera(info: &CameraInfo, port: &str, n: u32) -> Result<(), String>
         .build()
         .map_err(|e| format!("cannot start the I/O runtime: {e}"))?;
     let mut tb = rt
-        .block_on(TriggerBox::open(port, TriggerBoxConfig::default(), clock))
+        .block_on(TriggerBox::open(port, TriggerBoxConfig::default(), clock.clone()))
         .map_err(|e| format!("trigger box on {port}: {e}"))?;
     let options = OrbbecOptions {
-        clock,
+        clock: clock.clone(),
         trigger: TriggerChoice::Hardware,
         serial: Some(info.serial.clone()),
         ..Default::default()
