@@ -300,13 +300,16 @@ fn failed_stages_leave_no_temporaries_and_collect_names_corrupt_results() {
 }
 
 /// A tiny one-case manifest: `seconds` of fly-around at 96x64, no estimator.
+/// A one-case campaign of `seconds` on the host's clock: these tests stop the campaign while its
+/// `hitl run` child plays, which a simulated-clock case (the default) would finish too soon.
 fn one_case(dir: &Path, seconds: u32) -> PathBuf {
     write(
         dir,
         "one.toml",
         &format!(
             "[run]\nduration_s = {seconds}\ncapture_every_s = 1\narc_deg = \"420:440\"\n\
-             camera_size = \"96x64\"\nperception = \"none\"\nrange_m = 5\nconfig = \"{SHARED_VM_LAB}\"\n"
+             camera_size = \"96x64\"\nperception = \"none\"\nrange_m = 5\nconfig = \"{SHARED_VM_LAB}\"\n\
+             clock = \"realtime\"\n"
         ),
     )
 }

@@ -473,29 +473,23 @@ fn frames_table(episodes: &[Episode], tasks: &[String], fps: u32) -> (Table, Map
     let to32 = |q: [f64; DOF]| q.map(|v| v as f32).to_vec();
     add(
         "observation.state",
-        Column::F32s(7, rows(&|f| to32(f.state_q))),
-        feature("float32", 7, Some(&JOINTS[..])),
+        Column::F32s(DOF, rows(&|f| to32(f.state_q))),
+        feature("float32", DOF, Some(&JOINTS[..])),
     );
     add(
         "action",
-        Column::F32s(7, rows(&|f| to32(f.action_q))),
-        feature("float32", 7, Some(&JOINTS[..])),
+        Column::F32s(DOF, rows(&|f| to32(f.action_q))),
+        feature("float32", DOF, Some(&JOINTS[..])),
     );
-    add(
-        "observation.camera_pose",
-        Column::F32s(7, rows(&|f| pose7(f.camera_pose).to_vec())),
-        feature("float32", 7, Some(&POSE[..])),
-    );
-    add(
-        "observation.target_pose_gt",
-        Column::F32s(7, rows(&|f| pose7(f.target_gt).to_vec())),
-        feature("float32", 7, Some(&POSE[..])),
-    );
-    add(
-        "observation.target_pose_estimate",
-        Column::F32s(7, rows(&|f| pose7(f.target_estimate).to_vec())),
-        feature("float32", 7, Some(&POSE[..])),
-    );
+    let poses: [(&str, fn(&Frame) -> Option<Pose>); 3] = [
+        ("observation.camera_pose", |f| f.camera_pose),
+        ("observation.target_pose_gt", |f| f.target_gt),
+        ("observation.target_pose_estimate", |f| f.target_estimate),
+    ];
+    for (name, pose) in poses {
+        let c = Column::F32s(7, rows(&|f| pose7(pose(f)).to_vec()));
+        add(name, c, feature("float32", 7, Some(&POSE[..])));
+    }
     add(
         "observation.target_pose_estimate_valid",
         Column::Bool(

@@ -969,13 +969,7 @@ fn play(
         ..Health::default()
     };
     let status = Arc::new(LoopStatus::default());
-    let limits = &req.lab.limits;
-    let stop_limits = MoveLimits {
-        velocity: limits.velocity_rad_s,
-        acceleration: limits.acceleration_rad_s2,
-        jerk: limits.jerk_rad_s3,
-    };
-    let (planner, stop) = StopPlanner::start(stop_limits, table.dt, 10.0)
+    let (planner, stop) = StopPlanner::start(stop_limits(&req.lab), table.dt, 10.0)
         .map_err(|e| RunError::Device(format!("stop planner thread: {e}")))?;
     let reports =
         link.reports.take().ok_or_else(|| RunError::Device("arm reports already taken".into()))?;
@@ -1073,6 +1067,16 @@ fn play(
     let sim = None;
     let _ = wall_s;
     Ok(Played { outcome, rt: rt_report, status, captures, closed_loop, sim })
+}
+
+/// The stop planner's limits: the lab's joint velocity, acceleration and jerk.
+fn stop_limits(lab: &LabConfig) -> MoveLimits {
+    let limits = &lab.limits;
+    MoveLimits {
+        velocity: limits.velocity_rad_s,
+        acceleration: limits.acceleration_rad_s2,
+        jerk: limits.jerk_rad_s3,
+    }
 }
 
 /// `--closed-loop`: the tick's correction stage and the navigator that feeds it (open loop: a
