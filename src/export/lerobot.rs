@@ -449,6 +449,9 @@ fn feature(dtype: &str, n: usize, names: Option<&[&str]>) -> Value {
     json!({"dtype": dtype, "shape": [n], "names": names})
 }
 
+/// Which pose of a frame a column holds.
+type PoseOf = fn(&Frame) -> Option<Pose>;
+
 /// The frames table and its features (in the same order).
 fn frames_table(episodes: &[Episode], tasks: &[String], fps: u32) -> (Table, Map<String, Value>) {
     let unique = unique_tasks(tasks);
@@ -481,7 +484,7 @@ fn frames_table(episodes: &[Episode], tasks: &[String], fps: u32) -> (Table, Map
         Column::F32s(DOF, rows(&|f| to32(f.action_q))),
         feature("float32", DOF, Some(&JOINTS[..])),
     );
-    let poses: [(&str, fn(&Frame) -> Option<Pose>); 3] = [
+    let poses: [(&str, PoseOf); 3] = [
         ("observation.camera_pose", |f| f.camera_pose),
         ("observation.target_pose_gt", |f| f.target_gt),
         ("observation.target_pose_estimate", |f| f.target_estimate),
