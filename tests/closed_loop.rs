@@ -11,7 +11,7 @@
 
 mod common;
 
-use common::{hitl, SHARED_VM_LAB};
+use common::{hitl, SHARED_VM_LAB, SIM_CAPTURE_RUN};
 use hitl_record::reader::{read_recording, Recording};
 use hitl_record::Phase;
 use hitl_trajectories::kinematics::camera_pose;
@@ -65,22 +65,12 @@ fn play(traj: &Path, name: &str, extra: &[&str]) -> Played {
         traj.to_str().expect("utf-8"),
         "--record",
         mcap.to_str().expect("utf-8"),
-        "--camera",
-        "sim",
-        "--camera-preset",
-        "wfov",
-        "--camera-size",
-        "320x256",
-        "--light",
-        "sim",
         "--perception",
         "icp",
-        "--plain",
-        "--config",
-        SHARED_VM_LAB,
         "--stub-config",
         STUB_5MM_OFF,
     ];
+    args.extend_from_slice(&SIM_CAPTURE_RUN);
     args.extend_from_slice(extra);
     let out = {
         let _one = ONE_AT_A_TIME.lock().unwrap_or_else(|e| e.into_inner());
