@@ -24,8 +24,8 @@ demo: setup
 test: setup firmware test-rust lint
 
 test-rust:
-	$(CARGO) test --workspace --all-targets --no-fail-fast
-	$(CARGO) test --workspace --doc
+	$(CARGO) test --release --workspace --all-targets --no-fail-fast
+	$(CARGO) test --release --workspace --doc
 
 lint:
 	$(CARGO) fmt --all -- --check
