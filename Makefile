@@ -1,7 +1,9 @@
 # hitl: two commands on a fresh Linux machine with the Rust toolchain, Python 3 and pip.
 #   make demo   set up, then run a stub campaign: play a preset trajectory, record it, report it
 #   make test   set up, build the trigger box's firmware and box-sim, then run every test (Rust,
-#               Python peers, the firmware in box-sim through hitl), fmt and clippy
+#               Python peers, the firmware in box-sim through hitl), fmt and clippy. The tests
+#               build with --release: they reuse `make demo`'s optimised dependencies and play the
+#               same `hitl` binary (Cargo.toml's profiles say why).
 #   make firmware / firmware-check   the trigger box's firmware and box-sim (docs/trigger-box.md)
 SHELL := /bin/bash
 CARGO ?= cargo
