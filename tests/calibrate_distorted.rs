@@ -26,7 +26,7 @@ fn calibrate_through_a_lens_recovers_the_hidden_lab() {
     let out = dir.path().join("calibrated.toml");
     let truth_file = repo("calib/tests/data/true-lab-lens.toml");
     let run = Command::new(env!("CARGO_BIN_EXE_hitl"))
-        .args(["calibrate", "--views", "15", "--plain", "--config"])
+        .args(["calibrate", "--views", "15", "--plain", "--clock", "sim", "--config"])
         .arg(repo("tests/data/shared-vm-lab.toml"))
         .arg("--stub-config")
         .arg(&truth_file)

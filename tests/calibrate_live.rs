@@ -64,7 +64,7 @@ fn calibrate_recovers_the_hidden_lab_and_refuses_what_it_cannot_solve() {
     // away for tens of milliseconds, tests/data/shared-vm-lab.toml says why); the stub simulates
     // the true lab, 5.4 mm / 2.2 deg (camera) and 18 mm / 3.9 deg (target) off it.
     let run = hitl()
-        .args(["calibrate", "--views", "15", "--plain", "--config"])
+        .args(["calibrate", "--views", "15", "--plain", "--clock", "sim", "--config"])
         .arg(repo("tests/data/shared-vm-lab.toml"))
         .arg("--stub-config")
         .arg(repo("calib/tests/data/true-lab.toml"))

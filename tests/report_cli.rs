@@ -50,6 +50,8 @@ fn the_report_of_a_stub_run_has_a_contact_sheet_whose_model_fits_the_masks() {
         "--perception",
         "icp",
         "--plain",
+        "--clock",
+        "sim",
         "--config",
         SHARED_VM_LAB,
     ]);

@@ -10,7 +10,7 @@ use std::collections::BTreeMap;
 use std::ops::ControlFlow;
 
 mod common;
-use common::{hitl, plan_flyaround, SIM_CAPTURE_RUN};
+use common::{hitl, plan_flyaround, SIM_CAPTURE_RUN, SIM_CLOCK};
 
 #[test]
 fn one_image_set_and_one_ground_truth_per_capture_and_the_truth_lands_on_the_mask() {
@@ -20,7 +20,8 @@ fn one_image_set_and_one_ground_truth_per_capture_and_the_truth_lands_on_the_mas
     let (t, m) = (traj.to_str().expect("utf-8"), mcap.to_str().expect("utf-8"));
     plan_flyaround(&traj, "10", "25");
     let zstd = ["--record-compression", "zstd"];
-    let run = hitl(&[&["run", t, "--record", m][..], &zstd, &SIM_CAPTURE_RUN].concat());
+    let args = [&["run", t, "--record", m][..], &zstd, &SIM_CAPTURE_RUN, &SIM_CLOCK].concat();
+    let run = hitl(&args);
     let out =
         format!("{}{}", String::from_utf8_lossy(&run.stdout), String::from_utf8_lossy(&run.stderr));
     assert_eq!(run.status.code(), Some(0), "{out}");

@@ -72,6 +72,8 @@ fn every_capture_records_the_lens_and_the_light_level_of_its_exposure() {
         "--light",
         "sim",
         "--plain",
+        "--clock",
+        "sim",
         "--config",
         l,
         "--stub-config",

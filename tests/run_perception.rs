@@ -8,7 +8,7 @@ use hitl_record::reader::read_recording;
 use hitl_trajectories::npz;
 
 mod common;
-use common::{hitl, num, plan_flyaround, SIM_CAPTURE_RUN};
+use common::{hitl, num, plan_flyaround, SIM_CAPTURE_RUN, SIM_CLOCK};
 
 fn json(out: &std::process::Output) -> serde_json::Value {
     let text = String::from_utf8_lossy(&out.stdout);
@@ -29,7 +29,8 @@ fn a_live_icp_run_meets_the_goal_and_an_offline_rerun_repeats_it_under_the_recor
     assert!(captures >= 8, "{captures} captures");
 
     let policy = ["--perception", "icp", "--reregister-every", "4"];
-    let run = hitl(&[&["run", t, "--record", m][..], &policy, &SIM_CAPTURE_RUN].concat());
+    let args = [&["run", t, "--record", m][..], &policy, &SIM_CAPTURE_RUN, &SIM_CLOCK].concat();
+    let run = hitl(&args);
     let out =
         format!("{}{}", String::from_utf8_lossy(&run.stdout), String::from_utf8_lossy(&run.stderr));
     assert_eq!(run.status.code(), Some(0), "{out}");

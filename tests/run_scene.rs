@@ -65,6 +65,8 @@ fn an_orbit_run_records_frames_on_a_black_sky() {
         "--light",
         "sim",
         "--plain",
+        "--clock",
+        "sim",
         "--config",
         c,
         "--scene-kind",

@@ -130,6 +130,11 @@ impl RenderBacklog {
         self.0 .1.load(Ordering::Acquire) >= self.0 .0.load(Ordering::Acquire)
     }
 
+    /// Captures the render thread has finished (delivered or dropped).
+    pub fn rendered(&self) -> u64 {
+        self.0 .1.load(Ordering::Acquire)
+    }
+
     fn taken(&self) {
         self.0 .0.fetch_add(1, Ordering::AcqRel);
     }

@@ -3,3 +3,4 @@
 
 pub mod load;
 pub mod loop_timing;
+pub mod rtf;

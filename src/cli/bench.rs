@@ -34,6 +34,10 @@ pub enum Which {
     Tracker,
     /// Pose accuracy (paper's metrics) on synthetic fly-arounds at 5, 10, 25 and 50 m.
     Accuracy,
+    /// The simulated clock's real-time factor on a campaign case: a 30 s fly-around with 151
+    /// captures, ICP, recorded, `--clock sim`, at 320x256 and 1280x800 (--size: one size),
+    /// --range-m, the first --target-model (default asymmetric); the loop's and the whole run's.
+    Rtf,
 }
 
 #[derive(Debug, clap::Args)]
@@ -58,8 +62,8 @@ pub struct BenchArgs {
     /// Spin for the last N microseconds before each deadline.
     #[arg(long, default_value_t = 0, value_name = "US")]
     pub spin_us: u64,
-    /// Image size for the tracker and accuracy benchmarks (default: accuracy 320x256; tracker
-    /// the --camera-preset's own size).
+    /// Image size for the tracker, accuracy and rtf benchmarks (default: accuracy 320x256;
+    /// tracker the --camera-preset's own size; rtf 320x256 and 1280x800).
     #[arg(long, value_name = "WxH")]
     pub size: Option<String>,
     /// Tracker: the simulated camera's intrinsics preset, scaled to --size: wfov, nfov or orbbec
@@ -78,10 +82,11 @@ pub struct BenchArgs {
     #[arg(long, default_value_t = crate::capture::mask::DEFAULT_MARGIN_PX, value_name = "N")]
     pub mask_margin_px: u32,
     /// Tracker: a target (built-in name or OBJ/STL file), repeatable; default every built-in.
+    /// Rtf: the first one (default asymmetric).
     #[arg(long, value_name = "NAME|FILE")]
     pub target_model: Vec<String>,
-    /// Tracker: the fly-around's nearest range, real metres (the lab scale is the paper's
-    /// workspace scale at this range).
+    /// Tracker and rtf: the fly-around's nearest range, real metres (the lab scale is the
+    /// paper's workspace scale at this range).
     #[arg(long, default_value_t = 10.0, value_name = "M")]
     pub range_m: f64,
     /// Frames per model for the tracker and accuracy benchmarks.
@@ -253,6 +258,18 @@ pub fn run(args: BenchArgs) -> u8 {
             args.frames,
             0.077,
         ),
+        Which::Rtf => {
+            let sizes = size.map_or(vec![(320, 256), (1280, 800)], |s| vec![s]);
+            let target = args.target_model.first().cloned().unwrap_or_else(|| "asymmetric".into());
+            let o = crate::bench::rtf::RtfOptions { sizes, range_m: args.range_m, target };
+            let dir = std::env::temp_dir().join(format!("hitl-bench-rtf-{}", std::process::id()));
+            let figures = match std::env::current_exe() {
+                Ok(exe) => crate::bench::rtf::run(&o, &exe, &dir),
+                Err(e) => serde_json::json!({ "error": format!("this binary's path: {e}") }),
+            };
+            let _ = std::fs::remove_dir_all(&dir);
+            figures
+        }
         Which::Loop => loop_timing::run(&LoopBenchOptions {
             seconds: args.seconds,
             rate_hz: args.rate,

@@ -88,6 +88,11 @@ pub struct CalibrateArgs {
     /// Print plain progress lines even on a terminal.
     #[arg(long)]
     pub plain: bool,
+    /// The views' run on the host's clock (realtime) or on simulated time in lockstep with the
+    /// embedded stub (sim: as fast as the machine allows, as `hitl run --clock sim`); sim is
+    /// refused with --arm (docs/sim-clock.md).
+    #[arg(long, value_enum, default_value_t = session::ClockChoice::Realtime)]
+    pub clock: session::ClockChoice,
 }
 
 fn refuse<T>(code: u8, m: impl Into<String>) -> Result<T, Refusal> {
@@ -449,7 +454,7 @@ fn play_views(
         plain_progress: args.plain || !std::io::stderr().is_terminal(),
         live: None,
         closed_loop: None,
-        clock: session::ClockChoice::Realtime,
+        clock: args.clock,
     };
     match session::run(request) {
         Ok(r) if r.exit_code == exit::OK => {}

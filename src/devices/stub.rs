@@ -177,6 +177,11 @@ impl EmbeddedStub {
         self.render_backlog.idle()
     }
 
+    /// Captures the simulated camera has finished rendering (delivered or dropped).
+    pub fn frames_rendered(&self) -> u64 {
+        self.render_backlog.rendered()
+    }
+
     /// Shut the stub down; where its arm ended.
     pub fn close(self) -> Joints {
         let q = self.handle.plant_joints();

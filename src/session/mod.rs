@@ -268,7 +268,7 @@ impl RunReport {
             self.rt.summary()
         );
         if let Some(sim) = &self.sim {
-            s.push_str(&format!("\n{}", sim.describe()));
+            s.push_str(&format!("\n{}\n{}", sim.describe(), sim.describe_lockstep()));
         }
         if self.intake.frames > 0 {
             s.push_str(&format!("\n{}", self.intake.mask.describe()));
@@ -520,7 +520,7 @@ impl ArmTargetLink {
         #[cfg(feature = "stub")]
         if let (Some(stub), Some(time)) = (self.sim_stub(), clock.sim_time().cloned()) {
             let watched = link.watched(capture);
-            let stalls = std::sync::atomic::AtomicU64::new(0);
+            let times = sim_clock::WorldTimes::default();
             let period_ns = (dt * 1e9).round() as u64;
             return Box::new(move || {
                 let t = time.now_ns() + period_ns;
@@ -529,7 +529,7 @@ impl ArmTargetLink {
                     stub,
                     watched: &watched,
                     stop_planned: &|| true,
-                    stalls: &stalls,
+                    times: &times,
                 };
                 rt::World::advance_to(&mut world, t);
             });
@@ -782,6 +782,7 @@ impl ArmLink {
             reader: Arc::clone(&self.reader_progress),
             intake: Arc::clone(&capture.queues),
             perception: capture.perception.as_ref().map(|p| Arc::clone(&p.stats)),
+            estimates_steer: true,
         }
     }
 
@@ -998,12 +999,16 @@ fn play(
     #[cfg(feature = "stub")]
     let sim = target.sim_stub().zip(clock.sim_time().cloned());
     #[cfg(feature = "stub")]
-    let (watched, stalls) = (link.watched(capture), std::sync::atomic::AtomicU64::new(0));
+    let (watched, times) = (
+        // Without a closed loop nothing in the tick reads the estimates.
+        sim_clock::Watched { estimates_steer: req.closed_loop.is_some(), ..link.watched(capture) },
+        sim_clock::WorldTimes::default(),
+    );
     #[cfg(not(feature = "stub"))]
     let _ = target;
     let stop_planned = || planner.settled();
     #[cfg(feature = "stub")]
-    let (sim_time, stalls) = (sim.as_ref().map(|(_, t)| t.clone()), &stalls);
+    let (sim_time, times) = (sim.as_ref().map(|(_, t)| t.clone()), &times);
     let wall = std::time::Instant::now();
     let rt_options = req.rt;
     let rate = table.rate_hz;
@@ -1031,7 +1036,7 @@ fn play(
                             stub,
                             watched: &watched,
                             stop_planned: &stop_planned,
-                            stalls,
+                            times,
                         };
                         let period_ns = (1e9 / rate).round() as u64;
                         control.run_paced(&mut rt::Lockstep::new(time, period_ns, world))
@@ -1061,7 +1066,8 @@ fn play(
     let sim = sim_time.map(|time| SimStats {
         sim_s: time.now_ns() as f64 * 1e-9,
         wall_s,
-        stalls: stalls.load(Ordering::Relaxed),
+        stalls: times.stalls.load(Ordering::Relaxed),
+        lockstep_s: times.seconds(),
     });
     #[cfg(not(feature = "stub"))]
     let sim = None;

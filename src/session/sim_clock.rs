@@ -10,7 +10,9 @@
 //!    previous tick's setpoint acts on the physics that follows, as on a box that hears it at
 //!    once);
 //! 2. waits until the capture path is idle: every capture rendered, every frame through the
-//!    intake, every frame estimated; and until a requested stop has been planned;
+//!    intake, every frame estimated (without a closed loop, only once the next frame is
+//!    rendered: perception works on while the ticks go on); and until a requested stop has
+//!    been planned;
 //! 3. steps the stub to the deadline (faults due, reports due, physics);
 //! 4. waits until the report reader has read every report the stub wrote.
 //!
@@ -52,8 +54,15 @@ impl std::fmt::Display for ClockChoice {
     }
 }
 
-/// The longest a lockstep wait waits for the world, host time, before it gives up on it.
-pub const STALL: Duration = Duration::from_secs(10);
+/// The longest a lockstep wait waits for the world, host time, before it gives up on it: a
+/// thread that died, not a slow one (a 1280x1024 capture's render and first registration took
+/// over 10 s on the shared 2-core machine at load 18, and the run then did not repeat exactly).
+pub const STALL: Duration = Duration::from_secs(60);
+
+/// A lockstep wait's first sleep, once its yields found the world still busy; each next one is
+/// twice as long, up to [`PAUSE_MAX`].
+const PAUSE_MIN: Duration = Duration::from_micros(25);
+const PAUSE_MAX: Duration = Duration::from_micros(800);
 
 /// The report reader's progress, shared with the lockstep.
 #[derive(Debug, Default)]
@@ -62,6 +71,30 @@ pub struct ReaderProgress {
     pub published: AtomicU64,
     /// The reader thread has ended (its stream failed or it was told to stop).
     pub ended: AtomicBool,
+}
+
+/// Where a simulated run's host time went between ticks, and the waits that gave up; shared by
+/// the lockstep's world and the session that reports it.
+#[derive(Debug, Default)]
+pub struct WorldTimes {
+    /// Lockstep waits that gave up after [`STALL`].
+    pub stalls: AtomicU64,
+    /// Host ns waiting for the stub to answer the commands written.
+    pub commands_ns: AtomicU64,
+    /// Host ns waiting for the capture path (render, intake, estimate, stop plan).
+    pub capture_ns: AtomicU64,
+    /// Host ns stepping the stub (physics, faults, reports written).
+    pub stub_ns: AtomicU64,
+    /// Host ns waiting for the report reader.
+    pub reports_ns: AtomicU64,
+}
+
+impl WorldTimes {
+    /// Host seconds in each part of the lockstep: commands, capture path, stub, reports.
+    pub fn seconds(&self) -> [f64; 4] {
+        [&self.commands_ns, &self.capture_ns, &self.stub_ns, &self.reports_ns]
+            .map(|a| a.load(Ordering::Relaxed) as f64 * 1e-9)
+    }
 }
 
 /// How a simulated run went, in host time.
@@ -73,6 +106,10 @@ pub struct SimStats {
     pub wall_s: f64,
     /// Lockstep waits that gave up after [`STALL`] (0 in a run that repeats exactly).
     pub stalls: u64,
+    /// Host seconds between ticks spent on: the stub's answers to the commands, the capture
+    /// path, stepping the stub, the report reader ([`WorldTimes::seconds`]); the rest of
+    /// `wall_s` is the ticks themselves and the hand-over between threads.
+    pub lockstep_s: [f64; 4],
 }
 
 impl SimStats {
@@ -102,6 +139,18 @@ impl SimStats {
             }
         )
     }
+
+    /// Where the loop's host time went (a second line of the summary: the first stays the one
+    /// `hitl campaign` reads the factor from).
+    pub fn describe_lockstep(&self) -> String {
+        let [c, p, s, r] = self.lockstep_s;
+        format!(
+            "lockstep host time: {c:.3} s stub answering commands, {p:.3} s capture path \
+             (render, intake, estimate), {s:.3} s stepping the stub, {r:.3} s report reader, \
+             {:.3} s ticks and hand-over",
+            (self.wall_s - c - p - s - r).max(0.0)
+        )
+    }
 }
 
 /// What the lockstep waits on, besides the stub itself.
@@ -111,6 +160,11 @@ pub struct Watched {
     pub reader: Arc<ReaderProgress>,
     pub intake: Arc<IntakeQueues>,
     pub perception: Option<Arc<hitl_perception::WorkerStats>>,
+    /// Whether the loop acts on the estimates (`--closed-loop`): then each is made before the
+    /// next tick. Otherwise perception may finish a frame while the ticks go on and the next
+    /// capture renders, and must be idle only before the next frame reaches the intake (the
+    /// estimates, stamped with their frames' exposures, are the same either way).
+    pub estimates_steer: bool,
 }
 
 /// The simulated world of a `--clock sim` run: the embedded stub and the capture path.
@@ -120,32 +174,37 @@ pub struct SimWorld<'a> {
     pub watched: &'a Watched,
     /// Whether the stop planner has planned every stop asked of it.
     pub stop_planned: &'a (dyn Fn() -> bool + Sync),
-    pub stalls: &'a AtomicU64,
+    pub times: &'a WorldTimes,
 }
 
 #[cfg(feature = "stub")]
 impl SimWorld<'_> {
-    /// Wait until `done`, at most [`STALL`]; a give-up is counted.
-    fn wait(&self, done: impl Fn() -> bool) {
+    /// Wait until `done`, at most [`STALL`]; a give-up is counted, the host time added to
+    /// `spent`.
+    fn wait(&self, spent: &AtomicU64, done: impl Fn() -> bool) {
         if done() {
             return;
         }
         let start = Instant::now();
-        let mut spins = 0u32;
+        let (mut spins, mut pause) = (0u32, PAUSE_MIN);
         while !done() {
             if start.elapsed() > STALL {
-                self.stalls.fetch_add(1, Ordering::Relaxed);
-                return;
+                self.times.stalls.fetch_add(1, Ordering::Relaxed);
+                break;
             }
-            // A few yields (the answer is usually microseconds away), then short sleeps so
-            // that a slow render leaves the CPU to the renderer.
+            // A few yields (an answer from the stub or the reader is microseconds away), then
+            // sleeps that grow to PAUSE_MAX: a render or an estimate takes milliseconds, and
+            // the loop thread (SCHED_FIFO) waking every few microseconds to look took a quarter
+            // of the CPU the renderer needed.
             if spins < 50 {
                 spins += 1;
                 std::thread::yield_now();
             } else {
-                std::thread::sleep(Duration::from_micros(50));
+                std::thread::sleep(pause);
+                pause = (pause * 2).min(PAUSE_MAX);
             }
         }
+        spent.fetch_add(start.elapsed().as_nanos() as u64, Ordering::Relaxed);
     }
 
     fn commands_answered(&self) -> bool {
@@ -162,13 +221,22 @@ impl SimWorld<'_> {
         let intake_idle = q.frames_done.load(Ordering::Acquire)
             + q.frames_lost.load(Ordering::Acquire)
             >= q.frames_in.load(Ordering::Acquire);
-        let perception_idle = w.perception.as_ref().is_none_or(|s| {
-            s.estimated.load(Ordering::Acquire)
-                + s.errors.load(Ordering::Acquire)
-                + s.dropped.load(Ordering::Acquire)
-                >= s.pushed.load(Ordering::Acquire)
-        });
-        self.stub.renders_done() && intake_idle && perception_idle && (self.stop_planned)()
+        let perception_idle = || {
+            w.perception.as_ref().is_none_or(|s| {
+                s.estimated.load(Ordering::Acquire)
+                    + s.errors.load(Ordering::Acquire)
+                    + s.dropped.load(Ordering::Acquire)
+                    >= s.pushed.load(Ordering::Acquire)
+            })
+        };
+        // A rendered frame the tick has not polled yet goes to the intake, then to perception,
+        // at the next tick: the previous estimate must be made by then (a frame the camera
+        // dropped keeps this true, and perception in step with the ticks).
+        let frame_next = self.stub.frames_rendered() > q.frames_in.load(Ordering::Acquire);
+        self.stub.renders_done()
+            && intake_idle
+            && (!(w.estimates_steer || frame_next) || perception_idle())
+            && (self.stop_planned)()
     }
 
     fn reports_read(&self) -> bool {
@@ -183,9 +251,12 @@ impl SimWorld<'_> {
 #[cfg(feature = "stub")]
 impl World for SimWorld<'_> {
     fn advance_to(&mut self, t_ns: u64) {
-        self.wait(|| self.commands_answered());
-        self.wait(|| self.capture_path_idle());
+        let t = self.times;
+        self.wait(&t.commands_ns, || self.commands_answered());
+        self.wait(&t.capture_ns, || self.capture_path_idle());
+        let start = Instant::now();
         self.stub.advance_to(t_ns);
-        self.wait(|| self.reports_read());
+        t.stub_ns.fetch_add(start.elapsed().as_nanos() as u64, Ordering::Relaxed);
+        self.wait(&t.reports_ns, || self.reports_read());
     }
 }

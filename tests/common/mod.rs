@@ -39,6 +39,12 @@ pub const SIM_CAPTURE_RUN: [&str; 11] = [
     SHARED_VM_LAB,
 ];
 
+/// `hitl run` on the simulated clock (docs/sim-clock.md): the run plays in lockstep with the
+/// embedded stub as fast as the machine allows, and what it records does not depend on the
+/// machine's load. For the end-to-end tests that do not test timing (lateness, overruns, stalls)
+/// or a real device peer: those stay on the host's clock.
+pub const SIM_CLOCK: [&str; 2] = ["--clock", "sim"];
+
 /// Plans a 20 s fly-around at `range_m` with a capture every `capture_every` waypoints into
 /// `out`, and checks `hitl plan` succeeded.
 pub fn plan_flyaround(out: &Path, range_m: &str, capture_every: &str) {

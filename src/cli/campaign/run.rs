@@ -373,7 +373,7 @@ fn s(x: impl ToString) -> String {
 }
 
 /// `hitl plan` arguments of a case (the trajectory goes to `out`).
-pub(super) fn plan_args(case: &Case, out: &Path) -> Result<(Vec<String>, Option<String>), String> {
+pub(crate) fn plan_args(case: &Case, out: &Path) -> Result<(Vec<String>, Option<String>), String> {
     let preset = case.text("preset").unwrap_or("flyaround").to_string();
     let range = case.number("range_m").unwrap_or(10.0);
     let every = case.number("capture_every_s").unwrap_or(0.5);
@@ -439,12 +439,13 @@ pub(super) fn case_sun(case: &Case) -> Result<phase::CaseSun, String> {
 fn real_time_factor(log: &Path) -> Option<f64> {
     let text = std::fs::read_to_string(log).ok()?;
     let line = text.lines().rev().find(|l| l.starts_with("simulated clock:"))?;
-    let (_, rest) = line.rsplit_once('(')?;
+    // After the host seconds: a stalled run's line goes on with "wait(s) gave up".
+    let (_, rest) = line.split_once(" s (")?;
     rest.split_once("x real time")?.0.trim().parse().ok()
 }
 
 /// `hitl run` arguments of a case.
-pub(super) fn run_args(case: &Case, plan: &Path, record: &Path) -> Vec<String> {
+pub(crate) fn run_args(case: &Case, plan: &Path, record: &Path) -> Vec<String> {
     let mut a = vec![
         s("run"),
         s(plan.display()),
@@ -654,6 +655,10 @@ mod tests {
         )
         .expect("write");
         assert_eq!(real_time_factor(&log), Some(6.0));
+        let stalled = "simulated clock: 42.760 s simulated in 88.367 s (0.48x real time); 1 \
+                       lockstep wait(s) gave up after 60 s: this run may not repeat exactly\n";
+        std::fs::write(&log, stalled).expect("write");
+        assert_eq!(real_time_factor(&log), Some(0.48));
         std::fs::write(&log, "completed\ncaptures 3\n").expect("write");
         assert_eq!(real_time_factor(&log), None);
     }
