@@ -10,15 +10,19 @@
 //!    previous tick's setpoint acts on the physics that follows, as on a box that hears it at
 //!    once);
 //! 2. waits until the capture path is idle: every capture rendered, every frame through the
-//!    intake, every frame estimated; and until a requested stop has been planned;
-//! 3. steps the stub to the deadline (faults due, reports due, physics);
-//! 4. waits until the report reader has read every report the stub wrote.
+//!    intake, every frame estimated (or the perception worker ended), every estimate passed on to
+//!    the closed loop's navigator; and until a requested stop has been planned;
+//! 3. with `--closed-loop`, gives the navigator a turn when it has one due (an estimate waiting,
+//!    a capture's estimate overdue) and waits until it is over (`crate::closed_loop::lockstep`);
+//! 4. steps the stub to the deadline (faults due, reports due, physics);
+//! 5. waits until the report reader has read every report the stub wrote.
 //!
 //! So what the tick sees depends on simulated time alone, never on how fast the machine is or
 //! how loaded. Each wait is bounded by [`STALL`] of host time: a world that stops answering
 //! (a thread that died) is counted and the run goes on rather than hanging.
 
 use crate::capture::sink::IntakeQueues;
+use crate::closed_loop::lockstep::NavigatorTurns;
 #[cfg(feature = "stub")]
 use crate::devices::stub::EmbeddedStub;
 use crate::rt::World;
@@ -111,6 +115,8 @@ pub struct Watched {
     pub reader: Arc<ReaderProgress>,
     pub intake: Arc<IntakeQueues>,
     pub perception: Option<Arc<hitl_perception::WorkerStats>>,
+    /// `--closed-loop`: the navigator's turns.
+    pub navigator: Option<Arc<NavigatorTurns>>,
 }
 
 /// The simulated world of a `--clock sim` run: the embedded stub and the capture path.
@@ -163,12 +169,20 @@ impl SimWorld<'_> {
             + q.frames_lost.load(Ordering::Acquire)
             >= q.frames_in.load(Ordering::Acquire);
         let perception_idle = w.perception.as_ref().is_none_or(|s| {
-            s.estimated.load(Ordering::Acquire)
-                + s.errors.load(Ordering::Acquire)
-                + s.dropped.load(Ordering::Acquire)
-                >= s.pushed.load(Ordering::Acquire)
+            let produced = s.estimated.load(Ordering::Acquire) + s.errors.load(Ordering::Acquire);
+            let estimated = s.ended.load(Ordering::Acquire)
+                || produced + s.dropped.load(Ordering::Acquire) >= s.pushed.load(Ordering::Acquire);
+            estimated && w.navigator.as_ref().is_none_or(|n| n.flow().forwarded_all(produced))
         });
         self.stub.renders_done() && intake_idle && perception_idle && (self.stop_planned)()
+    }
+
+    /// The navigator's turn, when it has one due.
+    fn navigator_turn(&self) {
+        if let Some(n) = self.watched.navigator.as_ref().filter(|n| n.due()) {
+            let turn = n.give();
+            self.wait(|| n.taken(turn));
+        }
     }
 
     fn reports_read(&self) -> bool {
@@ -185,6 +199,7 @@ impl World for SimWorld<'_> {
     fn advance_to(&mut self, t_ns: u64) {
         self.wait(|| self.commands_answered());
         self.wait(|| self.capture_path_idle());
+        self.navigator_turn();
         self.stub.advance_to(t_ns);
         self.wait(|| self.reports_read());
     }
