@@ -66,23 +66,6 @@ pub struct TurnTaker {
 }
 
 impl NavigatorTurns {
-    /// Turns for a navigator fed through `flow`, at the ticks `status` reports.
-    pub fn new(flow: Arc<EstimateFlow>, status: Arc<LoopStatus>) -> TurnTaker {
-        let (ask, asks) = crossbeam::channel::bounded(1);
-        let turns = Arc::new(Self {
-            flow,
-            status,
-            handled: AtomicU64::new(0),
-            // Due at once: the first turn also waits for the thread to have started.
-            next_due: AtomicU64::new(0),
-            asked: AtomicU64::new(0),
-            done: AtomicU64::new(0),
-            ended: AtomicBool::new(false),
-            ask,
-        });
-        TurnTaker { turns, asks }
-    }
-
     pub fn flow(&self) -> &EstimateFlow {
         &self.flow
     }
@@ -116,6 +99,23 @@ impl NavigatorTurns {
 }
 
 impl TurnTaker {
+    /// Turns for a navigator fed through `flow`, at the ticks `status` reports.
+    pub fn new(flow: Arc<EstimateFlow>, status: Arc<LoopStatus>) -> Self {
+        let (ask, asks) = crossbeam::channel::bounded(1);
+        let turns = Arc::new(NavigatorTurns {
+            flow,
+            status,
+            handled: AtomicU64::new(0),
+            // Due at once: the first turn also waits for the thread to have started.
+            next_due: AtomicU64::new(0),
+            asked: AtomicU64::new(0),
+            done: AtomicU64::new(0),
+            ended: AtomicBool::new(false),
+            ask,
+        });
+        Self { turns, asks }
+    }
+
     /// The next turn, if one is given within `timeout`.
     pub fn next(&self, timeout: Duration) -> Option<u64> {
         self.asks.recv_timeout(timeout).ok()
@@ -157,7 +157,7 @@ mod tests {
     fn a_turn_is_due_for_a_waiting_estimate_or_a_due_tick_and_over_when_the_navigator_says() {
         let flow = Arc::new(EstimateFlow::default());
         let status = Arc::new(LoopStatus::default());
-        let taker = NavigatorTurns::new(Arc::clone(&flow), Arc::clone(&status));
+        let taker = TurnTaker::new(Arc::clone(&flow), Arc::clone(&status));
         let turns = Arc::clone(&taker.turns);
         assert!(turns.due(), "the first turn is due at once");
         let t = turns.give();

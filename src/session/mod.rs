@@ -33,7 +33,7 @@ use crate::capture::mask::{MaskDrawer, MaskSource};
 use crate::capture::sink::{IntakeQueues, RunTelemetry};
 use crate::capture::truth::LabFrames;
 use crate::closed_loop::corridor::Corridor;
-use crate::closed_loop::lockstep::{EstimateFlow, NavigatorTurns};
+use crate::closed_loop::lockstep::{EstimateFlow, NavigatorTurns, TurnTaker};
 use crate::closed_loop::navigator::{Navigator, NavigatorInputs, NavigatorSummary};
 use crate::closed_loop::segment::PlanTicks;
 use crate::closed_loop::{ClosedLoopConfig, PlanFrame};
@@ -1098,6 +1098,9 @@ fn stop_limits(lab: &LabConfig) -> MoveLimits {
     }
 }
 
+/// The tick's correction stage, the navigator and, on a simulated clock, its turns.
+type NavigatorStart = (CorrectionStage, Option<Navigator>, Option<Arc<NavigatorTurns>>);
+
 /// `--closed-loop`: the tick's correction stage and the navigator that feeds it, and on a
 /// simulated clock the navigator's turns for the lockstep (open loop: a stage that does nothing,
 /// no navigator).
@@ -1111,13 +1114,13 @@ fn start_navigator(
     status: &Arc<LoopStatus>,
     clock: MonotonicClock,
     plan_frame: Option<PlanFrame>,
-) -> Result<(CorrectionStage, Option<Navigator>, Option<Arc<NavigatorTurns>>), RunError> {
+) -> Result<NavigatorStart, RunError> {
     let (Some(config), Some(frame)) = (req.closed_loop, plan_frame) else {
         return Ok((CorrectionStage::open_loop(), None, None));
     };
     let turns = clock
         .sim_time()
-        .map(|_| NavigatorTurns::new(Arc::clone(&capture.navigation_flow), Arc::clone(status)));
+        .map(|_| TurnTaker::new(Arc::clone(&capture.navigation_flow), Arc::clone(status)));
     let lockstep = turns.as_ref().map(|t| Arc::clone(&t.turns));
     let results = capture.navigation.lock().ok().and_then(|mut r| r.take()).ok_or_else(|| {
         RunError::Device("--closed-loop: no pose estimates to navigate on".into())
