@@ -31,6 +31,9 @@ pub struct WorkerStats {
     pub resets: AtomicU64,
     /// Results not delivered because the consumer had gone.
     pub undelivered: AtomicU64,
+    /// The worker has ended (closed, or its backend panicked): a frame pushed now is never
+    /// estimated.
+    pub ended: AtomicBool,
 }
 
 impl WorkerStats {
@@ -126,14 +129,17 @@ pub fn spawn_worker(
     let queue = Arc::new(FrameQueue::new(queue_capacity, stats.clone()));
     let (tx, rx) = mpsc::channel(results_capacity.max(1));
     let handle = WorkerHandle { queue: queue.clone(), stats: stats.clone() };
-    let task = tokio::spawn(run(Reregistering::new(estimator, policy), queue, stats, tx));
+    let task = tokio::spawn(async move {
+        run(Reregistering::new(estimator, policy), queue, &stats, tx).await;
+        stats.ended.store(true, Ordering::Release);
+    });
     (handle, rx, task)
 }
 
 async fn run(
     mut driven: Reregistering,
     queue: Arc<FrameQueue>,
-    stats: Arc<WorkerStats>,
+    stats: &WorkerStats,
     tx: mpsc::Sender<PoseResult>,
 ) {
     loop {

@@ -131,6 +131,15 @@ pub struct RunArgs {
     /// complete.
     #[arg(long, value_name = "S", requires = "closed_loop")]
     pub drill_perception_stop_s: Option<f64>,
+    /// With --closed-loop, a drill of its gate: from --drill-perception-offset-s on, each pose
+    /// estimate the navigator takes is moved this far (lab metres) along the camera's x axis
+    /// (the recorded estimates are not); the filter must reject them, and too many in a row fall
+    /// back to the plan (recorded).
+    #[arg(long, value_name = "M", allow_hyphen_values = true, requires = "closed_loop")]
+    pub drill_perception_offset_m: Option<f64>,
+    /// When --drill-perception-offset-m starts, seconds into the playback.
+    #[arg(long, value_name = "S", default_value_t = 0.0, requires = "drill_perception_offset_m")]
+    pub drill_perception_offset_s: f64,
     /// Which time the run lives on: realtime (the host's clock) or sim (simulated time moved
     /// tick by tick in lockstep with the embedded stub: as fast as the machine allows, and two
     /// runs of the same inputs record the same messages). sim is refused with --arm
@@ -173,6 +182,17 @@ pub fn run(args: RunArgs, record: bool) -> u8 {
         );
         return exit::BAD_INPUT;
     }
+    let drill_perception_offset = match args
+        .drill_perception_offset_m
+        .map(|m| crate::closed_loop::EstimateOffsetDrill::new(m, args.drill_perception_offset_s))
+    {
+        None => None,
+        Some(Ok(drill)) => Some(drill),
+        Some(Err(e)) => {
+            crate::errln!("hitl run: {e}");
+            return exit::BAD_INPUT;
+        }
+    };
     let arm = args.devices.arm.as_deref();
     if let (ClockChoice::Sim, Some(host)) = (args.clock, arm) {
         crate::errln!(
@@ -261,6 +281,7 @@ pub fn run(args: RunArgs, record: bool) -> u8 {
         closed_loop: args.closed_loop.then(|| crate::closed_loop::ClosedLoopConfig {
             corridor_m: args.corridor_m,
             drill_perception_stop_s: args.drill_perception_stop_s,
+            drill_perception_offset,
             ..Default::default()
         }),
         clock: args.clock,

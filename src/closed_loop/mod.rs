@@ -12,11 +12,13 @@
 //! - [`guidance`]: deviation to camera correction to joint offset;
 //! - [`corridor`]: the bound on a correction, and its check;
 //! - [`segment`]: a correction as the tick plays it (Ruckig moves), checked;
-//! - [`navigator`]: the thread that ties them to the run: estimates in, segments and records out.
+//! - [`navigator`]: the thread that ties them to the run: estimates in, segments and records out;
+//! - [`lockstep`]: on a simulated clock, the navigator's turns between the loop's ticks.
 
 pub mod corridor;
 pub mod filter;
 pub mod guidance;
+pub mod lockstep;
 pub mod navigator;
 pub mod segment;
 
@@ -104,6 +106,36 @@ pub struct ClosedLoopConfig {
     /// `--drill-perception-stop-s`: stop the perception worker this many seconds into the
     /// playback (a drill of the fallback).
     pub drill_perception_stop_s: Option<f64>,
+    /// `--drill-perception-offset-m M --drill-perception-offset-s S`: from `S` seconds into the
+    /// playback, every estimate the navigator takes is moved `M` (lab metres) along the camera's
+    /// x axis (a drill of the gate: a perception that lies).
+    pub drill_perception_offset: Option<EstimateOffsetDrill>,
+}
+
+/// A drill of the gate: estimates moved by a fixed offset from a time on.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct EstimateOffsetDrill {
+    /// How far, lab metres, along the camera's x axis.
+    pub offset_m: f64,
+    /// From this many seconds into the playback.
+    pub from_s: f64,
+}
+
+impl EstimateOffsetDrill {
+    /// The drill, or why its flags are unusable.
+    pub fn new(offset_m: f64, from_s: f64) -> Result<Self, String> {
+        if !offset_m.is_finite() || offset_m.abs() > 1.0 {
+            return Err(format!(
+                "--drill-perception-offset-m must be a distance within 1 m, not {offset_m}"
+            ));
+        }
+        if !from_s.is_finite() || from_s < 0.0 {
+            return Err(format!(
+                "--drill-perception-offset-s must be 0 or more seconds, not {from_s}"
+            ));
+        }
+        Ok(Self { offset_m, from_s })
+    }
 }
 
 impl Default for ClosedLoopConfig {
@@ -114,6 +146,7 @@ impl Default for ClosedLoopConfig {
             fallback_after: 5,
             hold_s: 1.5,
             drill_perception_stop_s: None,
+            drill_perception_offset: None,
         }
     }
 }

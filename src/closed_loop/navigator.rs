@@ -8,6 +8,7 @@
 
 use super::filter::{Gate, RelNavFilter};
 use super::guidance::wanted_correction;
+use super::lockstep::{wait_until, TurnTaker, GIVE_UP};
 use super::segment::{CartState, PlanTicks, Planned, SegmentRules};
 use super::{corridor::Corridor, filter::FilterNoise, ClosedLoopConfig, PlanFrame};
 use crate::control::correction::{CorrectionQueues, CorrectionSegment};
@@ -47,6 +48,9 @@ pub struct NavigatorInputs {
     pub clock: MonotonicClock,
     /// The perception worker, for the drill that stops it.
     pub perception: Option<WorkerHandle>,
+    /// On a simulated clock: the turns the lockstep gives (`super::lockstep`); on the host's
+    /// clock, none: estimates are taken as they come.
+    pub turns: Option<TurnTaker>,
 }
 
 /// What the closed loop did, for the run's summary and metadata.
@@ -97,9 +101,11 @@ impl Navigator {
     pub fn spawn(inputs: NavigatorInputs) -> std::io::Result<Self> {
         let stop = Arc::new(AtomicBool::new(false));
         let flag = Arc::clone(&stop);
-        let handle = std::thread::Builder::new()
-            .name("hitl-navigator".into())
-            .spawn(move || State::new(inputs).run(&flag))?;
+        let handle =
+            std::thread::Builder::new().name("hitl-navigator".into()).spawn(move || {
+                let _ended = inputs.turns.as_ref().map(|t| EndTurns(Arc::clone(&t.turns)));
+                State::new(inputs).run(&flag)
+            })?;
         Ok(Self { stop, handle: Some(handle) })
     }
 
@@ -116,6 +122,16 @@ impl Drop for Navigator {
         if let Some(h) = self.handle.take() {
             let _ = h.join();
         }
+    }
+}
+
+/// Tells the lockstep that no more turns will be taken when the navigator's thread ends, even
+/// by a panic (the lockstep would otherwise wait for each turn in vain).
+struct EndTurns(Arc<super::lockstep::NavigatorTurns>);
+
+impl Drop for EndTurns {
+    fn drop(&mut self) {
+        self.0.end();
     }
 }
 
@@ -179,6 +195,8 @@ struct State {
     fallen_back: bool,
     return_sent: bool,
     drilled: bool,
+    /// Taking turns in a simulated clock's lockstep.
+    lockstep: bool,
     summary: NavigatorSummary,
 }
 
@@ -200,6 +218,7 @@ impl State {
             fallen_back: false,
             return_sent: false,
             drilled: false,
+            lockstep: false,
             summary: NavigatorSummary::default(),
             inp,
         }
@@ -221,24 +240,80 @@ impl State {
     }
 
     fn run(mut self, stop: &AtomicBool) -> NavigatorSummary {
-        while !stop.load(Ordering::Acquire) && !self.inp.status.done.load(Ordering::Acquire) {
-            self.drain_queues();
-            let now_tick = self.inp.status.tick.load(Ordering::Relaxed);
-            self.drill(now_tick);
+        match self.inp.turns.take() {
+            Some(turns) => self.run_in_turns(stop, &turns),
+            None => self.run_freely(stop),
+        }
+    }
+
+    fn running(&self, stop: &AtomicBool) -> bool {
+        !stop.load(Ordering::Acquire) && !self.inp.status.done.load(Ordering::Acquire)
+    }
+
+    /// On the host's clock: each estimate as it comes, what is due at least every 10 ms.
+    fn run_freely(mut self, stop: &AtomicBool) -> NavigatorSummary {
+        while self.running(stop) {
             match self.inp.results.recv_timeout(Duration::from_millis(10)) {
-                Ok(r) => self.on_result(&r),
+                Ok(r) => {
+                    self.drain_queues();
+                    self.on_result(&r);
+                }
                 Err(crossbeam::channel::RecvTimeoutError::Timeout) => {}
                 // Perception has ended: what is left is missing captures.
                 Err(crossbeam::channel::RecvTimeoutError::Disconnected) => {
                     std::thread::sleep(Duration::from_millis(10))
                 }
             }
-            self.find_missing(self.inp.status.tick.load(Ordering::Relaxed));
-            if self.fallen_back && !self.return_sent {
-                self.send_return();
-            }
+            self.due_work();
         }
         self.summary
+    }
+
+    /// On a simulated clock: only in the turns the lockstep gives, while the loop waits, so
+    /// every decision is taken at the same tick in every run (`super::lockstep`).
+    fn run_in_turns(mut self, stop: &AtomicBool, turns: &TurnTaker) -> NavigatorSummary {
+        self.lockstep = true;
+        while self.running(stop) {
+            let Some(turn) = turns.next(Duration::from_millis(10)) else { continue };
+            self.drain_queues();
+            while let Ok(r) = self.inp.results.try_recv() {
+                self.on_result(&r);
+                turns.handled();
+            }
+            self.due_work();
+            turns.over(turn, self.next_due());
+        }
+        self.summary
+    }
+
+    /// What is due by the loop's tick without a new estimate: the drill, the captures whose
+    /// estimate is overdue, the return to the plan after a fallback.
+    fn due_work(&mut self) {
+        self.drain_queues();
+        let now_tick = self.inp.status.tick.load(Ordering::Acquire);
+        self.drill(now_tick);
+        self.find_missing(now_tick);
+        if self.fallen_back && !self.return_sent {
+            self.send_return();
+        }
+    }
+
+    /// The first tick at which [`Self::due_work`] may have something to do (each tick while
+    /// the return to the plan waits to be sent).
+    fn next_due(&self) -> u64 {
+        if self.fallen_back && !self.return_sent {
+            return 0;
+        }
+        let missing = self
+            .inp
+            .capture_ticks
+            .get(self.next_capture)
+            .map_or(u64::MAX, |k| k + self.missing_after_ticks() + 1);
+        let drill = match self.drill_tick() {
+            Some(at) if !self.drilled => at,
+            _ => u64::MAX,
+        };
+        missing.min(drill)
     }
 
     fn drain_queues(&mut self) {
@@ -267,26 +342,59 @@ impl State {
         }
     }
 
+    /// The loop tick `s` seconds into the playback.
+    fn playback_tick(&self, s: f64) -> u64 {
+        self.inp.plan.first_tick + (s / self.inp.dt) as u64
+    }
+
+    /// When `--drill-perception-stop-s` stops the perception worker.
+    fn drill_tick(&self) -> Option<u64> {
+        self.inp.config.drill_perception_stop_s.map(|s| self.playback_tick(s))
+    }
+
     /// `--drill-perception-stop-s`: the perception worker is told to stop.
     fn drill(&mut self, now_tick: u64) {
-        let Some(s) = self.inp.config.drill_perception_stop_s else { return };
-        let at = self.inp.plan.first_tick + (s / self.inp.dt) as u64;
+        let Some(at) = self.drill_tick() else { return };
         if self.drilled || now_tick < at {
             return;
         }
         self.drilled = true;
         if let Some(p) = &self.inp.perception {
             p.close();
+            // In lockstep, the turn ends with the worker: a frame the next tick hands it is
+            // then never estimated, in every run alike.
+            if self.lockstep {
+                let ended = &p.stats.ended;
+                wait_until(GIVE_UP, || ended.load(Ordering::Acquire));
+            }
         }
+        let s = self.inp.config.drill_perception_stop_s.unwrap_or_default();
         self.event(format!("closed loop drill: perception stopped {s} s into the playback"));
+    }
+
+    /// `--drill-perception-offset-m`: what the drill adds to the estimate of the capture at
+    /// loop tick `k` (camera frame, lab metres).
+    fn drilled_offset(&self, k: u64) -> nalgebra::Vector3<f64> {
+        match self.inp.config.drill_perception_offset {
+            Some(d) if k >= self.playback_tick(d.from_s) => nalgebra::Vector3::x() * d.offset_m,
+            _ => nalgebra::Vector3::zeros(),
+        }
     }
 
     /// The offset the tick applied at `k` (from the switches it reported).
     fn offset_at(&self, k: u64) -> JointState {
-        let Some(&(_, id)) = self.switches.iter().rev().find(|(t, _)| *t <= k) else {
-            return JointState::default();
-        };
-        self.sent.iter().find(|s| s.id == id).map_or_else(JointState::default, |s| s.at(k))
+        self.in_effect_at(k).map_or_else(JointState::default, |s| s.at(k))
+    }
+
+    /// The camera correction the tick applied at `k` (base frame, lab metres).
+    fn correction_at(&self, k: u64) -> nalgebra::Vector3<f64> {
+        self.in_effect_at(k).map_or_else(nalgebra::Vector3::zeros, |s| s.cart_at(k).p)
+    }
+
+    /// The segment in effect at tick `k` (from the switches the tick reported).
+    fn in_effect_at(&self, k: u64) -> Option<&Sent> {
+        let &(_, id) = self.switches.iter().rev().find(|(t, _)| *t <= k)?;
+        self.sent.iter().find(|s| s.id == id)
     }
 
     fn on_result(&mut self, r: &PoseResult) {
@@ -310,8 +418,9 @@ impl State {
         let off = self.offset_at(k);
         let q: Joints = std::array::from_fn(|j| planned.q[j] + off.q[j]);
         let cam = camera_pose(&q, &self.mount);
-        let seen = cam * Point3::from(pose.translation.vector);
+        let seen = cam * Point3::from(pose.translation.vector + self.drilled_offset(k));
         let z_lab = -(seen.coords - self.inp.frame.target_base_m);
+        let in_effect = self.correction_at(k);
         let z = self.inp.frame.lab_to_rtn(&z_lab);
         let t_orbit =
             (k - self.inp.plan.first_tick) as f64 * self.inp.dt * self.inp.frame.time_scale;
@@ -331,14 +440,16 @@ impl State {
             Gate::Rejected { mahalanobis2 } => self.unusable(
                 k,
                 Unusable::Gated,
-                json!({ "mahalanobis2": finite(mahalanobis2), "measured_lab_m": z_lab.as_slice() }),
+                json!({ "mahalanobis2": finite(mahalanobis2), "measured_lab_m": z_lab.as_slice(),
+                        "correction_lab_m": in_effect.as_slice() }),
             ),
             Gate::Accepted { mahalanobis2 } => {
                 self.in_a_row = 0;
                 self.summary.accepted += 1;
                 self.record(
                     ClosedLoopTopic::Gate,
-                    json!({ "tick": k, "used": true, "reason": "accepted", "mahalanobis2": mahalanobis2, "measured_lab_m": z_lab.as_slice() }),
+                    json!({ "tick": k, "used": true, "reason": "accepted", "mahalanobis2": mahalanobis2,
+                            "measured_lab_m": z_lab.as_slice(), "correction_lab_m": in_effect.as_slice() }),
                 );
                 if !self.fallen_back {
                     self.correct();
@@ -373,9 +484,14 @@ impl State {
         }
     }
 
+    /// Ticks after its capture at which a capture's estimate is missing.
+    fn missing_after_ticks(&self) -> u64 {
+        (self.inp.config.max_age_s / self.inp.dt).ceil() as u64
+    }
+
     /// Captures whose estimate has not come `max_age_s` after them.
     fn find_missing(&mut self, now_tick: u64) {
-        let wait = (self.inp.config.max_age_s / self.inp.dt).ceil() as u64;
+        let wait = self.missing_after_ticks();
         while let Some(&k) = self.inp.capture_ticks.get(self.next_capture) {
             if k + wait >= now_tick {
                 break;

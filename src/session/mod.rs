@@ -33,6 +33,7 @@ use crate::capture::mask::{MaskDrawer, MaskSource};
 use crate::capture::sink::{IntakeQueues, RunTelemetry};
 use crate::capture::truth::LabFrames;
 use crate::closed_loop::corridor::Corridor;
+use crate::closed_loop::lockstep::{EstimateFlow, NavigatorTurns, TurnTaker};
 use crate::closed_loop::navigator::{Navigator, NavigatorInputs, NavigatorSummary};
 use crate::closed_loop::segment::PlanTicks;
 use crate::closed_loop::{ClosedLoopConfig, PlanFrame};
@@ -627,6 +628,8 @@ struct CapturePath {
     estimates: Option<tokio::task::JoinHandle<u64>>,
     /// `--closed-loop`: every estimate, for the navigator (taken when the loop starts).
     navigation: std::sync::Mutex<Option<crossbeam::channel::Receiver<PoseResult>>>,
+    /// How many estimates went that way (a simulated clock's lockstep waits on it).
+    navigation_flow: Arc<EstimateFlow>,
     intake: Intake,
     queues: Arc<IntakeQueues>,
     live: Option<hitl_record::LiveServer>,
@@ -660,6 +663,7 @@ impl CapturePath {
             }
             None => (None, None),
         };
+        let navigation_flow = Arc::new(EstimateFlow::default());
         let (perception, estimates) = match &req.perception {
             BackendSpec::None => (None, None),
             spec => {
@@ -675,12 +679,13 @@ impl CapturePath {
                         let _guard = runtime.enter();
                         let (handle, mut results, _task) = spawn_worker(est, 4, 64, req.reregister);
                         let sink = record.clone();
+                        let flow = Arc::clone(&navigation_flow);
                         let forward = runtime.spawn(async move {
                             let mut n = 0u64;
                             while let Some(r) = results.recv().await {
                                 if let Some(tee) = &tee {
                                     // Never waits: a navigator that fell behind misses it.
-                                    let _ = tee.try_send(r.clone());
+                                    flow.count(tee.try_send(r.clone()).is_ok());
                                 }
                                 if let (Ok(est), Some(sink)) = (&r.estimate, &sink) {
                                     if let Some(pose) = est.pose {
@@ -722,7 +727,17 @@ impl CapturePath {
         )
         .map_err(|e| RunError::Device(format!("capture intake thread: {e}")))?;
         let navigation = std::sync::Mutex::new(navigation);
-        Ok(Self { recorder, record, perception, estimates, navigation, intake, queues, live })
+        Ok(Self {
+            recorder,
+            record,
+            perception,
+            estimates,
+            navigation,
+            navigation_flow,
+            intake,
+            queues,
+            live,
+        })
     }
 
     /// Drain the intake, let perception finish, write the run's last event and close the file.
@@ -783,6 +798,7 @@ impl ArmLink {
             intake: Arc::clone(&capture.queues),
             perception: capture.perception.as_ref().map(|p| Arc::clone(&p.stats)),
             estimates_steer: true,
+            navigator: None,
         }
     }
 
@@ -986,7 +1002,7 @@ fn play(
         clock: clock.clone(),
     };
     let interlocks = Interlocks::new(Thresholds::from_lab(&req.lab));
-    let (correction, navigator) = start_navigator(
+    let (correction, navigator, turns) = start_navigator(
         req,
         program,
         table,
@@ -1001,11 +1017,15 @@ fn play(
     #[cfg(feature = "stub")]
     let (watched, times) = (
         // Without a closed loop nothing in the tick reads the estimates.
-        sim_clock::Watched { estimates_steer: req.closed_loop.is_some(), ..link.watched(capture) },
+        sim_clock::Watched {
+            estimates_steer: req.closed_loop.is_some(),
+            navigator: turns,
+            ..link.watched(capture)
+        },
         sim_clock::WorldTimes::default(),
     );
     #[cfg(not(feature = "stub"))]
-    let _ = target;
+    let _ = (target, turns);
     let stop_planned = || planner.settled();
     #[cfg(feature = "stub")]
     let (sim_time, times) = (sim.as_ref().map(|(_, t)| t.clone()), &times);
@@ -1085,8 +1105,12 @@ fn stop_limits(lab: &LabConfig) -> MoveLimits {
     }
 }
 
-/// `--closed-loop`: the tick's correction stage and the navigator that feeds it (open loop: a
-/// stage that does nothing, no navigator).
+/// The tick's correction stage, the navigator and, on a simulated clock, its turns.
+type NavigatorStart = (CorrectionStage, Option<Navigator>, Option<Arc<NavigatorTurns>>);
+
+/// `--closed-loop`: the tick's correction stage and the navigator that feeds it, and on a
+/// simulated clock the navigator's turns for the lockstep (open loop: a stage that does nothing,
+/// no navigator).
 #[allow(clippy::too_many_arguments)]
 fn start_navigator(
     req: &RunRequest,
@@ -1097,10 +1121,14 @@ fn start_navigator(
     status: &Arc<LoopStatus>,
     clock: MonotonicClock,
     plan_frame: Option<PlanFrame>,
-) -> Result<(CorrectionStage, Option<Navigator>), RunError> {
+) -> Result<NavigatorStart, RunError> {
     let (Some(config), Some(frame)) = (req.closed_loop, plan_frame) else {
-        return Ok((CorrectionStage::open_loop(), None));
+        return Ok((CorrectionStage::open_loop(), None, None));
     };
+    let turns = clock
+        .sim_time()
+        .map(|_| TurnTaker::new(Arc::clone(&capture.navigation_flow), Arc::clone(status)));
+    let lockstep = turns.as_ref().map(|t| Arc::clone(&t.turns));
     let results = capture.navigation.lock().ok().and_then(|mut r| r.take()).ok_or_else(|| {
         RunError::Device("--closed-loop: no pose estimates to navigate on".into())
     })?;
@@ -1126,9 +1154,10 @@ fn start_navigator(
         record: capture.record.clone(),
         clock,
         perception: capture.perception.clone(),
+        turns,
     })
     .map_err(|e| RunError::Device(format!("closed-loop navigator thread: {e}")))?;
-    Ok((CorrectionStage::closed_loop(queues), Some(navigator)))
+    Ok((CorrectionStage::closed_loop(queues), Some(navigator), lockstep))
 }
 
 /// The run's `closed_loop` metadata record: the settings and what the closed loop did.
@@ -1142,6 +1171,10 @@ fn closed_loop_metadata(
         m.insert("fallback_after".into(), c.fallback_after.to_string());
         m.insert("max_age_s".into(), c.max_age_s.to_string());
         m.insert("hold_s".into(), c.hold_s.to_string());
+        if let Some(d) = c.drill_perception_offset {
+            m.insert("drill_perception_offset_m".into(), d.offset_m.to_string());
+            m.insert("drill_perception_offset_s".into(), d.from_s.to_string());
+        }
     }
     for (k, v) in [
         ("accepted", s.accepted),

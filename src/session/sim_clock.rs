@@ -10,17 +10,21 @@
 //!    previous tick's setpoint acts on the physics that follows, as on a box that hears it at
 //!    once);
 //! 2. waits until the capture path is idle: every capture rendered, every frame through the
-//!    intake, every frame estimated (without a closed loop, only once the next frame is
+//!    intake, every frame estimated (or the perception worker ended) and every estimate passed on
+//!    to the closed loop's navigator (without a closed loop, only once the next frame is
 //!    rendered: perception works on while the ticks go on); and until a requested stop has
 //!    been planned;
-//! 3. steps the stub to the deadline (faults due, reports due, physics);
-//! 4. waits until the report reader has read every report the stub wrote.
+//! 3. with `--closed-loop`, gives the navigator a turn when it has one due (an estimate waiting,
+//!    a capture's estimate overdue) and waits until it is over (`crate::closed_loop::lockstep`);
+//! 4. steps the stub to the deadline (faults due, reports due, physics);
+//! 5. waits until the report reader has read every report the stub wrote.
 //!
 //! So what the tick sees depends on simulated time alone, never on how fast the machine is or
 //! how loaded. Each wait is bounded by [`STALL`] of host time: a world that stops answering
 //! (a thread that died) is counted and the run goes on rather than hanging.
 
 use crate::capture::sink::IntakeQueues;
+use crate::closed_loop::lockstep::NavigatorTurns;
 #[cfg(feature = "stub")]
 use crate::devices::stub::EmbeddedStub;
 use crate::rt::World;
@@ -165,6 +169,8 @@ pub struct Watched {
     /// capture renders, and must be idle only before the next frame reaches the intake (the
     /// estimates, stamped with their frames' exposures, are the same either way).
     pub estimates_steer: bool,
+    /// `--closed-loop`: the navigator's turns.
+    pub navigator: Option<Arc<NavigatorTurns>>,
 }
 
 /// The simulated world of a `--clock sim` run: the embedded stub and the capture path.
@@ -223,10 +229,12 @@ impl SimWorld<'_> {
             >= q.frames_in.load(Ordering::Acquire);
         let perception_idle = || {
             w.perception.as_ref().is_none_or(|s| {
-                s.estimated.load(Ordering::Acquire)
-                    + s.errors.load(Ordering::Acquire)
-                    + s.dropped.load(Ordering::Acquire)
-                    >= s.pushed.load(Ordering::Acquire)
+                let produced =
+                    s.estimated.load(Ordering::Acquire) + s.errors.load(Ordering::Acquire);
+                let estimated = s.ended.load(Ordering::Acquire)
+                    || produced + s.dropped.load(Ordering::Acquire)
+                        >= s.pushed.load(Ordering::Acquire);
+                estimated && w.navigator.as_ref().is_none_or(|n| n.flow().forwarded_all(produced))
             })
         };
         // A rendered frame the tick has not polled yet goes to the intake, then to perception,
@@ -237,6 +245,22 @@ impl SimWorld<'_> {
             && intake_idle
             && (!(w.estimates_steer || frame_next) || perception_idle())
             && (self.stop_planned)()
+    }
+
+    /// The navigator's turn, when it has one due (its wait counts as the capture path's).
+    fn navigator_turn(&self) {
+        if let Some(n) = self.watched.navigator.as_ref().filter(|n| n.due()) {
+            let turn = n.give();
+            self.wait(&self.times.capture_ns, || n.taken(turn));
+        }
+    }
+
+    /// The navigator's turn, when it has one due.
+    fn navigator_turn(&self) {
+        if let Some(n) = self.watched.navigator.as_ref().filter(|n| n.due()) {
+            let turn = n.give();
+            self.wait(|| n.taken(turn));
+        }
     }
 
     fn reports_read(&self) -> bool {
@@ -254,6 +278,7 @@ impl World for SimWorld<'_> {
         let t = self.times;
         self.wait(&t.commands_ns, || self.commands_answered());
         self.wait(&t.capture_ns, || self.capture_path_idle());
+        self.navigator_turn();
         let start = Instant::now();
         self.stub.advance_to(t_ns);
         t.stub_ns.fetch_add(start.elapsed().as_nanos() as u64, Ordering::Relaxed);

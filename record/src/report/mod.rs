@@ -1,6 +1,7 @@
 //! `hitl report`: a summary JSON, SVG plots, a contact sheet and an `index.html` for one
 //! recording.
 
+pub mod closed_loop;
 pub mod contact;
 pub mod plots;
 pub mod summary;
@@ -58,7 +59,7 @@ pub(crate) fn io(path: &Path) -> impl FnOnce(std::io::Error) -> ReportError + '_
 type PlotFn = fn(&Recording, &Path) -> Result<(), String>;
 
 /// Every plot a report may write (which ones depends on what the run recorded).
-const PLOT_FILES: [&str; 7] = [
+const PLOT_FILES: [&str; 8] = [
     "joints.svg",
     "tracking_error.svg",
     "lateness.svg",
@@ -66,6 +67,7 @@ const PLOT_FILES: [&str; 7] = [
     "sun_phase.svg",
     "pose_error.svg",
     "paper_error.svg",
+    "closed_loop_error.svg",
 ];
 
 /// The list of files a report wrote, one path (relative to its folder) a line: the next report
@@ -195,6 +197,13 @@ pub fn write_report_with(
     if !rec.pose_estimate.is_empty() {
         plots.push(("pose_error.svg", "Pose error", plots::pose_error));
     }
+    if summary.closed_loop_error.is_some() {
+        plots.push((
+            "closed_loop_error.svg",
+            "Relative-position error, open and closed loop",
+            plots::closed_loop_error,
+        ));
+    }
     let mut shown = Vec::new();
     let per_frame = summary
         .pose_metrics
@@ -288,6 +297,9 @@ fn index_html(mcap: &Path, s: &Summary, plots: &[(&str, &str)]) -> String {
             ));
         }
     }
+    if let Some(c) = &s.closed_loop_error {
+        closed_loop_html(&mut h, c);
+    }
     let drops: u64 = s.dropped.values().sum();
     h.push_str(&format!(
         "<tr><th>telemetry dropped</th><td{}>{drops}</td></tr><tr><th>captures not recorded</th><td{}>{}</td></tr></table>\n",
@@ -327,6 +339,20 @@ fn index_html(mcap: &Path, s: &Summary, plots: &[(&str, &str)]) -> String {
     }
     h.push_str("</table>\n<p><a href=\"summary.json\">summary.json</a></p>\n</body></html>\n");
     h
+}
+
+/// The closed loop's row: the relative-position error open and closed, mean and at the end.
+fn closed_loop_html(h: &mut String, c: &closed_loop::ClosedLoopError) {
+    let mean = |s: &Option<summary::Spread>| s.as_ref().map_or(f64::NAN, |s| s.mean);
+    let (open_end, closed_end) = c.last.map_or((f64::NAN, f64::NAN), |l| (l.open_mm, l.closed_mm));
+    h.push_str(&format!(
+        "<tr><th>relative-position error (closed loop)</th><td>{} captures, as vision measured it: open loop mean {:.3} mm (last {:.3}), closed loop mean {:.3} mm (last {:.3}), lab</td></tr>",
+        c.per_capture.len(),
+        mean(&c.open_mm),
+        open_end,
+        mean(&c.closed_mm),
+        closed_end
+    ));
 }
 
 fn hex(c: [u8; 3]) -> String {

@@ -1,6 +1,7 @@
 //! The report's plots, as SVG (text is left to the browser: no font files or fontconfig).
 
 use crate::reader::Recording;
+use crate::report::closed_loop::CaptureError;
 use crate::report::summary::{pose_errors, secs, t0, tracking_errors};
 use hitl_hal::DOF;
 use plotters::coord::Shift;
@@ -385,5 +386,60 @@ pub fn paper_error(rec: &Recording, per_frame: &[serde_json::Value], out: &Path)
             .draw()
             .map_err(err)?;
     }
+    root.present().map_err(err)
+}
+
+/// `--closed-loop`: the relative-position error per capture as vision measured it, without the
+/// correction (what open loop would have had) and with the correction in effect (closed loop),
+/// lab millimetres (`crate::report::closed_loop`).
+pub fn closed_loop_error(rec: &Recording, out: &Path) -> Res {
+    let Some(e) = crate::report::closed_loop::closed_loop_error(rec) else {
+        return Err("no closed-loop measurement in the recording".into());
+    };
+    let c = thin(&e.per_capture, MAX_POINTS);
+    let root = SVGBackend::new(out, (1000, 420)).into_drawing_area();
+    root.fill(&WHITE).map_err(err)?;
+    let xs = span(c.iter().map(|p| p.t_s));
+    let ys = span(c.iter().flat_map(|p| [p.open_mm, p.closed_mm]).chain([0.0]));
+    let mut chart = ChartBuilder::on(&root)
+        .margin(10)
+        .caption("relative-position error as vision measured it (lab mm)", ("sans-serif", 16))
+        .x_label_area_size(40)
+        .y_label_area_size(55)
+        .build_cartesian_2d(xs, ys.clone())
+        .map_err(err)?;
+    chart.configure_mesh().x_desc("t (s)").y_desc("lab mm").draw().map_err(err)?;
+    let open = PALETTE[1];
+    let closed = PALETTE[0];
+    type Pick = fn(&CaptureError) -> f64;
+    let series: [(&str, RGBColor, Pick); 2] = [
+        ("open loop (without the correction)", open, |p| p.open_mm),
+        ("closed loop (with the correction in effect)", closed, |p| p.closed_mm),
+    ];
+    for (label, colour, pick) in series {
+        chart
+            .draw_series(LineSeries::new(
+                c.iter().map(|p| (p.t_s, pick(p))),
+                colour.stroke_width(2),
+            ))
+            .map_err(err)?
+            .label(label)
+            .legend(move |(x, y)| {
+                PathElement::new(vec![(x, y), (x + 15, y)], colour.stroke_width(2))
+            });
+    }
+    // Captures the filter did not use, as hollow marks on the closed-loop line.
+    chart
+        .draw_series(
+            c.iter().filter(|p| !p.used).map(|p| Circle::new((p.t_s, p.closed_mm), 3, RED)),
+        )
+        .map_err(err)?;
+    mark_events(&mut chart, &event_times(rec), &ys)?;
+    chart
+        .configure_series_labels()
+        .background_style(WHITE.mix(0.8))
+        .border_style(BLACK)
+        .draw()
+        .map_err(err)?;
     root.present().map_err(err)
 }

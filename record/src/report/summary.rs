@@ -101,6 +101,10 @@ pub struct Summary {
     /// keys), when the report was given a scorer (set by the report, not by [`summarize`]).
     #[serde(skip_serializing_if = "Option::is_none")]
     pub pose_metrics: Option<serde_json::Value>,
+    /// `hitl run --closed-loop`: the relative-position error per capture, open and closed loop,
+    /// as vision measured it (`crate::report::closed_loop`).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub closed_loop_error: Option<crate::report::closed_loop::ClosedLoopError>,
     /// The captures on the report's contact sheet (set by the report, not by [`summarize`]).
     #[serde(skip_serializing_if = "Option::is_none")]
     pub contact_sheet: Option<crate::report::contact::ContactSheet>,
@@ -252,6 +256,7 @@ pub fn summarize(rec: &Recording) -> Summary {
         trajectory_sha256: run.and_then(|m| m.get("trajectory_sha256").cloned()),
         scale: run.and_then(|m| m.get("scale").cloned()),
         pose_metrics: None,
+        closed_loop_error: crate::report::closed_loop::closed_loop_error(rec),
         contact_sheet: None,
     }
 }
