@@ -14,7 +14,9 @@
 //! by the tick) samples the plant's measured joints ([`SharedArmState`], a lock-free load), the
 //! light level ([`LightLevel`]) and the clock, and queues them with the request; the render
 //! thread then renders that exposure with its own `MjData`, however late it gets to it (the
-//! readout). A render backlog therefore delays delivery, never moves the exposure away from
+//! readout), and hands the image to a readout thread that applies the depth model
+//! ([`NoiseModel`]: the Orbbec model passes over every pixel) and delivers the frame, so the next
+//! capture renders while the last one is read out (issue 23: 10 Hz at 1280x800). A render backlog therefore delays delivery, never moves the exposure away from
 //! its trigger; a full queue refuses the capture (`Busy`). Next to each frame it keeps a [`RenderTruth`] (the joints it rendered
 //! at, the camera pose with and without noise) for ground truth: [`SimCamera::poll_sim_frame`]
 //! returns both, [`SimCamera::last_truth`] gives the truth of the frame `poll_frame` returned last.
@@ -208,6 +210,7 @@ pub struct SimCamera {
     stream: Arc<AtomicCell<Intrinsics>>,
     frames: Receiver<(RgbdFrame, RenderTruth)>,
     thread: Option<JoinHandle<()>>,
+    readout: Option<JoinHandle<()>>,
     intrinsics: Intrinsics,
     lens: Distortion,
     mask: bool,
@@ -243,20 +246,27 @@ impl SimCamera {
         let (req_tx, req_rx) = channel::bounded(config.queue.max(1));
         let stream = Arc::new(AtomicCell::new(k));
         let (frame_tx, frame_rx) = channel::bounded(config.queue.max(1) + 2);
+        // One rendered image waits for the readout while the next renders.
+        let (image_tx, image_rx) = channel::bounded::<Rendered>(1);
         let dropped = Arc::new(AtomicU64::new(0));
         let (ready_tx, ready_rx) = channel::bounded(1);
         let kind = config.renderer;
         let shading = config.shading;
         let size = (config.intrinsics.width, config.intrinsics.height);
-        let (worker_stream, worker_dropped) = (stream.clone(), dropped.clone());
+        let readout =
+            Readout { frames: frame_tx, dropped: dropped.clone(), backlog: config.backlog.clone() };
+        let readout = std::thread::Builder::new()
+            .name("sim-camera-readout".into())
+            .spawn(move || readout.run(image_rx))
+            .map_err(|e| SimCameraError::Config(format!("cannot start readout thread: {e}")))?;
+        let worker_stream = stream.clone();
         let backlog = config.backlog.clone();
         let worker = move |renderer| Worker {
             renderer,
             noise: config.noise,
             stream: worker_stream,
             lens: LensCache::default(),
-            frames: frame_tx,
-            dropped: worker_dropped,
+            images: image_tx,
             backlog,
         };
         let thread = std::thread::Builder::new()
@@ -276,6 +286,7 @@ impl SimCamera {
         let opened = ready_rx.recv().unwrap_or(Err(SimCameraError::Disconnected));
         if let Err(e) = opened {
             let _ = thread.join();
+            let _ = readout.join();
             return Err(e);
         }
         Ok(Self {
@@ -286,6 +297,7 @@ impl SimCamera {
             stream,
             frames: frame_rx,
             thread: Some(thread),
+            readout: Some(readout),
             intrinsics: k,
             lens: config.lens,
             mask: true,
@@ -323,8 +335,10 @@ impl SimCamera {
 
 impl Drop for SimCamera {
     fn drop(&mut self) {
-        self.requests = None; // the render thread ends when its request channel closes
-        if let Some(t) = self.thread.take() {
+        // The render thread ends when its request channel closes, the readout thread when the
+        // render thread's image channel does.
+        self.requests = None;
+        for t in [self.thread.take(), self.readout.take()].into_iter().flatten() {
             let _ = t.join();
         }
     }
@@ -486,60 +500,100 @@ struct Worker {
     stream: Arc<AtomicCell<Intrinsics>>,
     /// The remap of the stream's lens, built once.
     lens: LensCache,
-    frames: Sender<(RgbdFrame, RenderTruth)>,
-    dropped: Arc<AtomicU64>,
+    images: Sender<Rendered>,
     backlog: RenderBacklog,
+}
+
+/// A capture rendered (through the lens), its depth model still to apply.
+struct Rendered {
+    exposure: Exposure,
+    image: Image,
+    truth: RenderTruth,
+    noise: FrameNoise,
 }
 
 impl Worker {
     fn run(mut self, exposures: Receiver<Exposure>) {
         while let Ok(exposure) = exposures.recv() {
-            // A renderer that fails after it opened ends the thread: the camera then reports
-            // itself disconnected at the next poll, which faults the run.
-            let Ok(out) = self.capture(exposure) else {
+            // A renderer that fails after it opened ends the thread (and so the readout's): the
+            // camera then reports itself disconnected at the next poll, which faults the run.
+            let Ok(rendered) = self.render(exposure) else {
                 self.backlog.finished();
                 return;
             };
-            if self.frames.try_send(out).is_err() {
+            if self.images.send(rendered).is_err() {
+                self.backlog.finished();
+                return;
+            }
+        }
+    }
+
+    fn render(&mut self, exposure: Exposure) -> Result<Rendered, String> {
+        let tick = exposure.request.tick;
+        let noise = self.noise.draw(tick);
+        let intr = self.stream.load();
+        let (image, truth) = match &mut self.renderer {
+            Backend::RayCast(r) => {
+                let Ok(out) = draw_through(
+                    &mut **r,
+                    &exposure.sample.q,
+                    &intr,
+                    exposure.level,
+                    &noise,
+                    &mut self.lens,
+                );
+                out
+            }
+            Backend::Mujoco(r) => {
+                r.set_capture_tick(tick); // the `orbit` Sun at this capture
+                draw_through(
+                    &mut **r,
+                    &exposure.sample.q,
+                    &intr,
+                    exposure.level,
+                    &noise,
+                    &mut self.lens,
+                )
+                .map_err(|e| e.to_string())?
+            }
+        };
+        Ok(Rendered { exposure, image, truth, noise })
+    }
+}
+
+/// The readout thread's state: applies the depth model and delivers.
+struct Readout {
+    frames: Sender<(RgbdFrame, RenderTruth)>,
+    dropped: Arc<AtomicU64>,
+    backlog: RenderBacklog,
+}
+
+impl Readout {
+    fn run(self, images: Receiver<Rendered>) {
+        while let Ok(Rendered { exposure, mut image, truth, mut noise }) = images.recv() {
+            noise.apply_depth(&mut image.depth_m, &image.intrinsics);
+            let Exposure { request, sample, exposure_ns, level } = exposure;
+            let frame = RgbdFrame {
+                request,
+                device_ns: (sample.sim_time_s.max(0.0) * 1e9) as u64,
+                exposure_ns,
+                timestamp: TimestampSource::DeviceExposure,
+                intrinsics: image.intrinsics,
+                color: Arc::new(image.color),
+                depth_m: Arc::new(image.depth_m),
+                mask: Some(Arc::new(image.mask)),
+            };
+            let truth = RenderTruth {
+                tick: request.tick,
+                sim_time_s: sample.sim_time_s,
+                light_level: level,
+                ..truth
+            };
+            if self.frames.try_send((frame, truth)).is_err() {
                 self.dropped.fetch_add(1, Ordering::Relaxed);
             }
             self.backlog.finished();
         }
-    }
-
-    fn capture(&mut self, exposure: Exposure) -> Result<(RgbdFrame, RenderTruth), String> {
-        let Exposure { request, sample, exposure_ns, level } = exposure;
-        let mut noise = self.noise.draw(request.tick);
-        let intr = self.stream.load();
-        let (image, truth) = match &mut self.renderer {
-            Backend::RayCast(r) => {
-                let Ok(out) =
-                    capture_through(&mut **r, &sample.q, &intr, level, &mut noise, &mut self.lens);
-                out
-            }
-            Backend::Mujoco(r) => {
-                r.set_capture_tick(request.tick); // the `orbit` Sun at this capture
-                capture_through(&mut **r, &sample.q, &intr, level, &mut noise, &mut self.lens)
-                    .map_err(|e| e.to_string())?
-            }
-        };
-        let frame = RgbdFrame {
-            request,
-            device_ns: (sample.sim_time_s.max(0.0) * 1e9) as u64,
-            exposure_ns,
-            timestamp: TimestampSource::DeviceExposure,
-            intrinsics: image.intrinsics,
-            color: Arc::new(image.color),
-            depth_m: Arc::new(image.depth_m),
-            mask: Some(Arc::new(image.mask)),
-        };
-        let truth = RenderTruth {
-            tick: request.tick,
-            sim_time_s: sample.sim_time_s,
-            light_level: level,
-            ..truth
-        };
-        Ok((frame, truth))
     }
 }
 
@@ -579,16 +633,30 @@ pub fn capture_through<R: Draw + ?Sized>(
     noise: &mut FrameNoise,
     lens: &mut LensCache,
 ) -> Result<(Image, RenderTruth), R::Error> {
+    let (mut image, truth) = draw_through(renderer, q, intr, level, noise, lens)?;
+    noise.apply_depth(&mut image.depth_m, &image.intrinsics);
+    Ok((image, truth))
+}
+
+/// [`capture_through`] before the depth model: the image as rendered through the lens with the
+/// frame's pose and principal point noise, and its truth.
+fn draw_through<R: Draw + ?Sized>(
+    renderer: &mut R,
+    q: &Joints,
+    intr: &Intrinsics,
+    level: f32,
+    noise: &FrameNoise,
+    lens: &mut LensCache,
+) -> Result<(Image, RenderTruth), R::Error> {
     renderer.set_joints(q);
     let camera = renderer.camera_in_lab();
     let rendered = camera * noise.rotation;
-    let mut image = match lens.get(intr) {
+    let image = match lens.get(intr) {
         None => renderer.render_from(&rendered, intr, level, noise.shift_px)?,
         Some(map) => {
             map.remap(&renderer.render_from(&rendered, &map.canvas, level, noise.shift_px)?)
         }
     };
-    noise.apply_depth(&mut image.depth_m, &image.intrinsics);
     let base_inv = renderer.base_in_lab().inverse();
     let truth = RenderTruth {
         tick: 0,

@@ -4,8 +4,8 @@
 //! latency through [`SimCamera`].
 
 use super::{
-    capture_with, render_capture, FrameNoise, GlRenderer, LightLevel, Preset, Renderer, SimCamera,
-    SimCameraConfig,
+    capture_with, render_capture, DepthModel, FrameNoise, GlRenderer, LightLevel, NoiseModel,
+    Preset, Renderer, SimCamera, SimCameraConfig, StereoDepth,
 };
 use crate::mujoco_plant::{ArmSample, LabModel, SharedArmState};
 use hitl_hal::{CaptureRequest, Clock, Intrinsics, Joints, MonotonicClock, RgbdCamera};
@@ -118,6 +118,28 @@ fn figures(gl: &mut Option<GlRenderer>, ray: &mut Renderer, q: &Joints) -> serde
     serde_json::Value::Object(out)
 }
 
+/// Milliseconds the Orbbec depth model (`--depth-model orbbec`) takes over one 1280x800 frame
+/// of the scene (ray-cast once), as the camera's readout thread applies it: mean and smallest of
+/// five captures.
+fn depth_model_ms(ray: &mut Renderer, q: &Joints) -> serde_json::Value {
+    let intr = Preset::Orbbec.at(1280, 800);
+    let (image, _) = render_capture(ray, q, &intr, 1.0, &mut FrameNoise::none());
+    let model = NoiseModel {
+        depth_model: DepthModel::Orbbec(StereoDepth::GEMINI_305),
+        ..NoiseModel::default()
+    };
+    let times: Vec<f64> = (0..5u64)
+        .map(|tick| {
+            let mut depth = image.depth_m.clone();
+            let t0 = Instant::now();
+            model.draw(tick).apply_depth(&mut depth, &image.intrinsics);
+            t0.elapsed().as_secs_f64() * 1e3
+        })
+        .collect();
+    let mean = times.iter().sum::<f64>() / times.len() as f64;
+    json!({ "mean": mean, "min": times.iter().copied().fold(f64::INFINITY, f64::min) })
+}
+
 /// Runs the closure it is handed with every core busy (the caller's load generator).
 pub type UnderLoad<'a> = &'a dyn Fn(&mut dyn FnMut());
 
@@ -140,6 +162,7 @@ pub fn bench_render(under_load: Option<UnderLoad<'_>>) -> serde_json::Value {
         Err(e) => (None, Some(e.to_string())),
     };
     let idle = figures(&mut gl, &mut renderer, &q);
+    let depth_model = depth_model_ms(&mut renderer, &q);
     let loaded = under_load.map(|run| {
         let mut f = serde_json::Value::Null;
         run(&mut || f = figures(&mut gl, &mut renderer, &q));
@@ -194,6 +217,7 @@ pub fn bench_render(under_load: Option<UnderLoad<'_>>) -> serde_json::Value {
         "loadavg_1m": loadavg,
         "idle": idle,
         "load": loaded,
+        "orbbec_depth_model_ms_1280x800": depth_model,
         "trigger_to_frame_ms_320x256": { "p50": pct(0.5), "p99": pct(0.99), "n": latencies_ms.len() },
     })
 }

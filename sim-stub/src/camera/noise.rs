@@ -201,6 +201,10 @@ impl FrameNoise {
 /// The Orbbec model on `depth`: pixels invalid at edges, in the projector's or the second
 /// camera's shadow, at grazing angles and nearer than the minimum range; the rest get
 /// N(0, (k z^2)^2) added, drawn in pixel order from `rng`.
+///
+/// Written for 1280x800 at 10 Hz on the stub's render path (issue 23): one pass per test over
+/// rows, the rays' x/z and y/z per column and row computed once, the grazing test without a
+/// square root or a division, the shadows' shifted columns once per row.
 fn stereo_depth(
     m: &StereoDepth,
     depth: &mut [f32],
@@ -212,51 +216,19 @@ fn stereo_depth(
         return;
     }
     let clean = depth.to_vec();
-    let z = |u: usize, v: usize| f64::from(clean[v * w + u]);
     let mut invalid = vec![false; w * h];
-    // Depth edges: a jump to a neighbour (or to no return) invalidates both sides.
-    for v in 0..h {
-        for u in 0..w {
-            let a = z(u, v);
-            let edge = |b: f64| a > 0.0 && (b <= 0.0 || (a - b).abs() > m.edge_jump * a.min(b));
-            let right = u + 1 < w && (edge(z(u + 1, v)) || (a <= 0.0 && z(u + 1, v) > 0.0));
-            let down = v + 1 < h && (edge(z(u, v + 1)) || (a <= 0.0 && z(u, v + 1) > 0.0));
-            if right {
-                invalid[v * w + u] = true;
-                invalid[v * w + u + 1] = true;
-            }
-            if down {
-                invalid[v * w + u] = true;
-                invalid[(v + 1) * w + u] = true;
-            }
-        }
-    }
+    mark_edges(&clean, w, h, m.edge_jump, &mut invalid);
     // Shadows: what a viewpoint `dx` metres along x cannot see.
+    let mut scratch = ShadowRow::new(w);
     for dx in [m.projector_x_m, m.baseline_m] {
         if dx != 0.0 {
-            mark_shadow(&clean, w, h, intr.fx * dx, m.edge_jump, &mut invalid);
-        }
-    }
-    // Grazing angles: the surface normal from the neighbours' back-projections.
-    let cos_max = m.grazing_deg.to_radians().cos();
-    let point = |u: usize, v: usize| -> Vector3<f64> {
-        let d = z(u, v);
-        Vector3::new((u as f64 - intr.cx) / intr.fx * d, (v as f64 - intr.cy) / intr.fy * d, d)
-    };
-    for v in 1..h.saturating_sub(1) {
-        for u in 1..w.saturating_sub(1) {
-            let i = v * w + u;
-            if invalid[i] || clean[i] <= 0.0 {
-                continue;
-            }
-            let n = (point(u + 1, v) - point(u - 1, v)).cross(&(point(u, v + 1) - point(u, v - 1)));
-            let ray = point(u, v);
-            let cos = n.dot(&ray).abs() / (n.norm() * ray.norm());
-            if cos.is_finite() && cos < cos_max {
-                invalid[i] = true;
+            for v in 0..h {
+                let row = v * w..(v + 1) * w;
+                scratch.mark(&clean[row.clone()], intr.fx * dx, m.edge_jump, &mut invalid[row]);
             }
         }
     }
+    mark_grazing(&clean, intr, m.grazing_deg, &mut invalid);
     let Ok(unit) = Normal::new(0.0, 1.0) else { return };
     for (d, bad) in depth.iter_mut().zip(&invalid) {
         let zf = f64::from(*d);
@@ -269,42 +241,114 @@ fn stereo_depth(
     }
 }
 
-/// Marks the pixels of `depth` that a viewpoint moved along the camera's x axis cannot see:
-/// `fb` is focal length times the offset (pixels times metres), so a point at depth z appears
-/// `fb / z` pixels to the left from there. Each row is splatted into a depth buffer of the moved
-/// view (neighbours on one surface fill the columns between them), and a pixel farther than that
-/// buffer where it lands is hidden.
-fn mark_shadow(depth: &[f32], w: usize, h: usize, fb: f64, jump: f64, invalid: &mut [bool]) {
-    let mut buf = vec![f64::INFINITY; w];
-    let column = |x: f64| -> Option<usize> {
-        let c = x.round();
-        (c >= 0.0 && c < w as f64).then_some(c as usize)
+/// Depth edges: a jump to the right or lower neighbour beyond `jump` of the nearer depth (or to
+/// no return) invalidates both sides.
+fn mark_edges(clean: &[f32], w: usize, h: usize, jump: f64, invalid: &mut [bool]) {
+    let edge = |a: f64, b: f64| -> bool {
+        if a > 0.0 {
+            b <= 0.0 || (a - b).abs() > jump * a.min(b)
+        } else {
+            b > 0.0
+        }
     };
     for v in 0..h {
-        let row = &depth[v * w..(v + 1) * w];
+        let row = &clean[v * w..(v + 1) * w];
+        let below = (v + 1 < h).then(|| &clean[(v + 1) * w..(v + 2) * w]);
+        for u in 0..w {
+            let a = f64::from(row[u]);
+            if u + 1 < w && edge(a, f64::from(row[u + 1])) {
+                invalid[v * w + u] = true;
+                invalid[v * w + u + 1] = true;
+            }
+            if let Some(below) = below {
+                if edge(a, f64::from(below[u])) {
+                    invalid[v * w + u] = true;
+                    invalid[(v + 1) * w + u] = true;
+                }
+            }
+        }
+    }
+}
+
+/// Grazing angles: a pixel whose surface (its normal from the neighbours' back-projections) is
+/// seen more than `grazing_deg` from head-on is invalid. With the ray of pixel (u, v) at depth d
+/// being d (x_u, y_v, 1), the test cos < cos_max is (n.p)^2 < cos_max^2 |n|^2 |p|^2.
+fn mark_grazing(clean: &[f32], intr: &Intrinsics, grazing_deg: f64, invalid: &mut [bool]) {
+    let (w, h) = (intr.width as usize, intr.height as usize);
+    let cos2 = grazing_deg.to_radians().cos().powi(2);
+    let xs: Vec<f64> = (0..w).map(|u| (u as f64 - intr.cx) / intr.fx).collect();
+    let ys: Vec<f64> = (0..h).map(|v| (v as f64 - intr.cy) / intr.fy).collect();
+    for v in 1..h.saturating_sub(1) {
+        let (up, row, down) = (&clean[(v - 1) * w..], &clean[v * w..], &clean[(v + 1) * w..]);
+        let y = ys[v];
+        for u in 1..w - 1 {
+            let i = v * w + u;
+            let d = f64::from(row[u]);
+            if invalid[i] || d <= 0.0 {
+                continue;
+            }
+            let (dl, dr) = (f64::from(row[u - 1]), f64::from(row[u + 1]));
+            let (du, dd) = (f64::from(up[u]), f64::from(down[u]));
+            // Across: p(u+1) - p(u-1); along: p(v+1) - p(v-1).
+            let a = Vector3::new(xs[u + 1] * dr - xs[u - 1] * dl, y * (dr - dl), dr - dl);
+            let b = Vector3::new(xs[u] * (dd - du), ys[v + 1] * dd - ys[v - 1] * du, dd - du);
+            let n = a.cross(&b);
+            let p = Vector3::new(xs[u], y, 1.0);
+            let np = n.dot(&p);
+            let lhs = np * np;
+            let rhs = cos2 * n.norm_squared() * p.norm_squared();
+            // A degenerate normal (n = 0) is left valid, as a NaN cosine was.
+            if rhs > 0.0 && lhs < rhs {
+                invalid[i] = true;
+            }
+        }
+    }
+}
+
+/// Scratch for [`ShadowRow::mark`], one row long, kept between rows.
+struct ShadowRow {
+    buf: Vec<f64>,
+    shifted: Vec<f64>,
+}
+
+impl ShadowRow {
+    fn new(w: usize) -> Self {
+        Self { buf: vec![f64::INFINITY; w], shifted: vec![0.0; w] }
+    }
+
+    /// Marks the pixels of one `row` of depth that a viewpoint moved along the camera's x axis
+    /// cannot see: `fb` is focal length times the offset (pixels times metres), so a point at
+    /// depth z appears `fb / z` pixels to the left from there. The row is splatted into a depth
+    /// buffer of the moved view (neighbours on one surface fill the columns between them), and
+    /// a pixel farther than that buffer where it lands is hidden.
+    fn mark(&mut self, row: &[f32], fb: f64, jump: f64, invalid: &mut [bool]) {
+        let w = row.len();
+        let (buf, shifted) = (&mut self.buf, &mut self.shifted);
         buf.fill(f64::INFINITY);
-        let shifted = |u: usize| u as f64 - fb / f64::from(row[u]);
+        for (u, (s, z)) in shifted.iter_mut().zip(row).enumerate() {
+            *s = u as f64 - fb / f64::from(*z);
+        }
         for u in 0..w {
             let a = f64::from(row[u]);
             if a <= 0.0 {
                 continue;
             }
-            let s = shifted(u);
+            let s = shifted[u];
             let (mut lo, mut hi, mut near) = (s, s, a);
             if u + 1 < w {
                 let b = f64::from(row[u + 1]);
                 if b > 0.0 && (a - b).abs() <= jump * a.min(b) {
-                    let t = shifted(u + 1);
+                    let t = shifted[u + 1];
                     (lo, hi, near) = (s.min(t), s.max(t), a.min(b));
                 }
             }
             let first = lo.round().max(0.0);
             let last = hi.round().min(w as f64 - 1.0);
-            let mut c = first;
-            while c <= last {
-                let k = c as usize;
-                buf[k] = buf[k].min(near);
-                c += 1.0;
+            if first > last {
+                continue;
+            }
+            for b in &mut buf[first as usize..=last as usize] {
+                *b = b.min(near);
             }
         }
         for u in 0..w {
@@ -312,10 +356,9 @@ fn mark_shadow(depth: &[f32], w: usize, h: usize, fb: f64, jump: f64, invalid: &
             if a <= 0.0 {
                 continue;
             }
-            if let Some(k) = column(shifted(u)) {
-                if a > buf[k] * (1.0 + jump) {
-                    invalid[v * w + u] = true;
-                }
+            let c = shifted[u].round();
+            if c >= 0.0 && c < w as f64 && a > buf[c as usize] * (1.0 + jump) {
+                invalid[u] = true;
             }
         }
     }
