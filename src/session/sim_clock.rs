@@ -255,14 +255,6 @@ impl SimWorld<'_> {
         }
     }
 
-    /// The navigator's turn, when it has one due.
-    fn navigator_turn(&self) {
-        if let Some(n) = self.watched.navigator.as_ref().filter(|n| n.due()) {
-            let turn = n.give();
-            self.wait(|| n.taken(turn));
-        }
-    }
-
     fn reports_read(&self) -> bool {
         let Some(sim) = self.stub.sim() else { return true };
         let r = &self.watched.reader;
