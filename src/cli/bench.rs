@@ -227,25 +227,8 @@ pub fn run(args: BenchArgs) -> u8 {
             serde_json::json!({ "bench": "record", "hitl": rust, "numpy_savez_compressed": numpy })
         }
         #[cfg(feature = "stub")]
-        Which::Tracker => match tracker_options(&args, size) {
-            Ok(o) => {
-                let noise = hitl_sim_stub::camera::NoiseModel {
-                    depth_model: hitl_sim_stub::camera::DepthModel::Orbbec(
-                        hitl_sim_stub::camera::StereoDepth::GEMINI_305,
-                    ),
-                    seed: 23,
-                    ..Default::default()
-                };
-                let orbbec = move |i: u64, d: &mut [f32], k: &hitl_hal::Intrinsics| {
-                    noise.draw(i).apply_depth(d, k)
-                };
-                let degrade: Option<hitl_perception::tracker_bench::DepthModel<'_>> =
-                    match args.depth_model {
-                        crate::devices::SimDepthModel::Orbbec => Some(&orbbec),
-                        crate::devices::SimDepthModel::Ideal => None,
-                    };
-                hitl_perception::tracker_bench::run(&o, degrade)
-            }
+        Which::Tracker => match tracker(&args, size) {
+            Ok(figures) => figures,
             Err(e) => {
                 crate::errln!("hitl bench tracker: {e}");
                 return exit::BAD_INPUT;
@@ -258,18 +241,7 @@ pub fn run(args: BenchArgs) -> u8 {
             args.frames,
             0.077,
         ),
-        Which::Rtf => {
-            let sizes = size.map_or(vec![(320, 256), (1280, 800)], |s| vec![s]);
-            let target = args.target_model.first().cloned().unwrap_or_else(|| "asymmetric".into());
-            let o = crate::bench::rtf::RtfOptions { sizes, range_m: args.range_m, target };
-            let dir = std::env::temp_dir().join(format!("hitl-bench-rtf-{}", std::process::id()));
-            let figures = match std::env::current_exe() {
-                Ok(exe) => crate::bench::rtf::run(&o, &exe, &dir),
-                Err(e) => serde_json::json!({ "error": format!("this binary's path: {e}") }),
-            };
-            let _ = std::fs::remove_dir_all(&dir);
-            figures
-        }
+        Which::Rtf => rtf(&args, size),
         Which::Loop => loop_timing::run(&LoopBenchOptions {
             seconds: args.seconds,
             rate_hz: args.rate,
@@ -287,4 +259,40 @@ pub fn run(args: BenchArgs) -> u8 {
         crate::outln!("{}", serde_json::to_string_pretty(&figures).unwrap_or_default());
     }
     exit::OK
+}
+
+/// `hitl bench tracker`: the ICP tracker on a camera's frames, the Orbbec stereo depth model
+/// applied when `--depth-model orbbec` asks for it.
+#[cfg(feature = "stub")]
+fn tracker(args: &BenchArgs, size: Option<(u32, u32)>) -> Result<serde_json::Value, String> {
+    let o = tracker_options(args, size)?;
+    let noise = hitl_sim_stub::camera::NoiseModel {
+        depth_model: hitl_sim_stub::camera::DepthModel::Orbbec(
+            hitl_sim_stub::camera::StereoDepth::GEMINI_305,
+        ),
+        seed: 23,
+        ..Default::default()
+    };
+    let orbbec =
+        move |i: u64, d: &mut [f32], k: &hitl_hal::Intrinsics| noise.draw(i).apply_depth(d, k);
+    let degrade: Option<hitl_perception::tracker_bench::DepthModel<'_>> = match args.depth_model {
+        crate::devices::SimDepthModel::Orbbec => Some(&orbbec),
+        crate::devices::SimDepthModel::Ideal => None,
+    };
+    Ok(hitl_perception::tracker_bench::run(&o, degrade))
+}
+
+/// `hitl bench rtf`: the simulated clock's real-time factor of a campaign case, played by this
+/// binary in a scratch folder that is removed afterwards.
+fn rtf(args: &BenchArgs, size: Option<(u32, u32)>) -> serde_json::Value {
+    let sizes = size.map_or(vec![(320, 256), (1280, 800)], |s| vec![s]);
+    let target = args.target_model.first().cloned().unwrap_or_else(|| "asymmetric".into());
+    let o = crate::bench::rtf::RtfOptions { sizes, range_m: args.range_m, target };
+    let dir = std::env::temp_dir().join(format!("hitl-bench-rtf-{}", std::process::id()));
+    let figures = match std::env::current_exe() {
+        Ok(exe) => crate::bench::rtf::run(&o, &exe, &dir),
+        Err(e) => serde_json::json!({ "error": format!("this binary's path: {e}") }),
+    };
+    let _ = std::fs::remove_dir_all(&dir);
+    figures
 }

@@ -212,27 +212,9 @@ pub fn run(args: RunArgs, record: bool) -> u8 {
     if let Some(kind) = args.scene_kind {
         lab.scene.kind = kind;
     }
-    let target = match arm {
-        None => ArmTarget::Stub { faults: args.stub_faults.clone() },
-        Some(host) => {
-            if args.stub_start_q.is_some() {
-                crate::errln!(
-                    "hitl run: --stub-start-q only applies to the embedded stub, not to --arm"
-                );
-                return exit::BAD_INPUT;
-            }
-            if !args.stub_faults.is_empty() {
-                crate::errln!(
-                    "hitl run: --stub-fault only applies to the embedded stub, not to --arm"
-                );
-                return exit::BAD_INPUT;
-            }
-            if let Err(Refusal(code, m)) = args.labs.confirm_real_arm(host) {
-                crate::errln!("hitl run: {m}");
-                return code;
-            }
-            ArmTarget::Remote { host: host.to_string() }
-        }
+    let target = match arm_target(&args, arm) {
+        Ok(target) => target,
+        Err(code) => return code,
     };
     let record = match (&args.record, record) {
         (Some(path), _) => Some(path.clone()),
@@ -296,4 +278,25 @@ pub fn run(args: RunArgs, record: bool) -> u8 {
             e.exit_code()
         }
     }
+}
+
+/// Which arm the run drives: the embedded stub (with its faults), or the real one at `arm` once
+/// the operator has confirmed the enclosure; stub-only flags with `--arm` are refused.
+fn arm_target(args: &RunArgs, arm: Option<&str>) -> Result<ArmTarget, u8> {
+    let Some(host) = arm else {
+        return Ok(ArmTarget::Stub { faults: args.stub_faults.clone() });
+    };
+    if args.stub_start_q.is_some() {
+        crate::errln!("hitl run: --stub-start-q only applies to the embedded stub, not to --arm");
+        return Err(exit::BAD_INPUT);
+    }
+    if !args.stub_faults.is_empty() {
+        crate::errln!("hitl run: --stub-fault only applies to the embedded stub, not to --arm");
+        return Err(exit::BAD_INPUT);
+    }
+    if let Err(Refusal(code, m)) = args.labs.confirm_real_arm(host) {
+        crate::errln!("hitl run: {m}");
+        return Err(code);
+    }
+    Ok(ArmTarget::Remote { host: host.to_string() })
 }

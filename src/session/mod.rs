@@ -1074,21 +1074,10 @@ fn play(
     })?;
     let wall_s = wall.elapsed().as_secs_f64();
     drop(planner);
-    let closed_loop = navigator.map(|n| {
-        let summary = n.finish();
-        if let Some(t) = &capture.record {
-            t.push_metadata("closed_loop", closed_loop_metadata(req, &summary));
-        }
-        summary
-    });
+    let closed_loop = navigator.map(|n| finish_navigator(req, n, capture));
     let captures = status.captures.load(Ordering::Acquire);
     #[cfg(feature = "stub")]
-    let sim = sim_time.map(|time| SimStats {
-        sim_s: time.now_ns() as f64 * 1e-9,
-        wall_s,
-        stalls: times.stalls.load(Ordering::Relaxed),
-        lockstep_s: times.seconds(),
-    });
+    let sim = sim_time.map(|time| times.stats(time.now_ns(), wall_s));
     #[cfg(not(feature = "stub"))]
     let sim = None;
     let _ = wall_s;
@@ -1158,6 +1147,15 @@ fn start_navigator(
     })
     .map_err(|e| RunError::Device(format!("closed-loop navigator thread: {e}")))?;
     Ok((CorrectionStage::closed_loop(queues), Some(navigator), lockstep))
+}
+
+/// Stop the navigator and record what the closed loop did in the run's `closed_loop` metadata.
+fn finish_navigator(req: &RunRequest, n: Navigator, capture: &CapturePath) -> NavigatorSummary {
+    let summary = n.finish();
+    if let Some(t) = &capture.record {
+        t.push_metadata("closed_loop", closed_loop_metadata(req, &summary));
+    }
+    summary
 }
 
 /// The run's `closed_loop` metadata record: the settings and what the closed loop did.

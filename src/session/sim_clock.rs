@@ -99,6 +99,16 @@ impl WorldTimes {
         [&self.commands_ns, &self.capture_ns, &self.stub_ns, &self.reports_ns]
             .map(|a| a.load(Ordering::Relaxed) as f64 * 1e-9)
     }
+
+    /// How the run went: `sim_ns` of simulated time played in `wall_s` host seconds.
+    pub fn stats(&self, sim_ns: u64, wall_s: f64) -> SimStats {
+        SimStats {
+            sim_s: sim_ns as f64 * 1e-9,
+            wall_s,
+            stalls: self.stalls.load(Ordering::Relaxed),
+            lockstep_s: self.seconds(),
+        }
+    }
 }
 
 /// How a simulated run went, in host time.
