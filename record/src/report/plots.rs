@@ -15,6 +15,20 @@ fn err<E: std::fmt::Display>(e: E) -> String {
     e.to_string()
 }
 
+/// The legend box every plot draws: its series labels on a translucent white box.
+fn draw_legend<'a, DB, CT>(chart: &mut ChartContext<'a, DB, CT>) -> Res
+where
+    DB: DrawingBackend + 'a,
+    CT: CoordTranslate,
+{
+    chart
+        .configure_series_labels()
+        .background_style(WHITE.mix(0.8))
+        .border_style(BLACK)
+        .draw()
+        .map_err(err)
+}
+
 /// The series colours of every plot (the report's joints, the campaign plots' targets).
 pub const PALETTE: [RGBColor; 7] = [
     RGBColor(31, 119, 180),
@@ -130,12 +144,7 @@ pub fn joints(rec: &Recording, out: &Path) -> Res {
             .label("setpoint")
             .legend(|(x, y)| PathElement::new(vec![(x, y), (x + 15, y)], BLUE.stroke_width(2)));
         mark_events(&mut chart, &events, &ys)?;
-        chart
-            .configure_series_labels()
-            .background_style(WHITE.mix(0.8))
-            .border_style(BLACK)
-            .draw()
-            .map_err(err)?;
+        draw_legend(&mut chart)?;
     }
     root.present().map_err(err)
 }
@@ -166,12 +175,7 @@ pub fn tracking_error(rec: &Recording, out: &Path) -> Res {
             .legend(move |(x, y)| PathElement::new(vec![(x, y), (x + 15, y)], *c));
     }
     mark_events(&mut chart, &event_times(rec), &ys)?;
-    chart
-        .configure_series_labels()
-        .background_style(WHITE.mix(0.8))
-        .border_style(BLACK)
-        .draw()
-        .map_err(err)?;
+    draw_legend(&mut chart)?;
     root.present().map_err(err)
 }
 
@@ -245,12 +249,7 @@ fn path_panel<DB: DrawingBackend>(
         .map_err(err)?
         .label("target")
         .legend(|(x, y)| TriangleMarker::new((x + 7, y), 4, RED.filled()));
-    chart
-        .configure_series_labels()
-        .background_style(WHITE.mix(0.8))
-        .border_style(BLACK)
-        .draw()
-        .map_err(err)
+    draw_legend(&mut chart)
 }
 
 /// The camera's position in the target frame (from `/tf`), two projections.
@@ -380,11 +379,7 @@ pub fn paper_error(rec: &Recording, per_frame: &[serde_json::Value], out: &Path)
         .map_err(err)?
         .label("up to the target's symmetry")
         .legend(move |(x, y)| PathElement::new(vec![(x, y), (x + 15, y)], sym.stroke_width(2)));
-        c.configure_series_labels()
-            .background_style(WHITE.mix(0.8))
-            .border_style(BLACK)
-            .draw()
-            .map_err(err)?;
+        draw_legend(&mut c)?;
     }
     root.present().map_err(err)
 }
@@ -435,11 +430,6 @@ pub fn closed_loop_error(rec: &Recording, out: &Path) -> Res {
         )
         .map_err(err)?;
     mark_events(&mut chart, &event_times(rec), &ys)?;
-    chart
-        .configure_series_labels()
-        .background_style(WHITE.mix(0.8))
-        .border_style(BLACK)
-        .draw()
-        .map_err(err)?;
+    draw_legend(&mut chart)?;
     root.present().map_err(err)
 }
