@@ -8,8 +8,9 @@
 //! lab configuration with the recovered camera mount and target pose and a `[calibration]`
 //! provenance block, atomically (a temporary file renamed into place: a refusal leaves nothing).
 //! The views' trajectory is handed to the session in memory (never written to a file); the
-//! recording lives in a temporary folder removed on exit unless `--record` keeps it; `--from-recording` solves such a recording again without
-//! moving anything (other thresholds, a corrected board definition).
+//! recording lives in a temporary folder removed on exit unless `--record` keeps it;
+//! `--from-recording` solves such a recording again without moving anything (other thresholds, a
+//! corrected board definition).
 //!
 //! Refusals, each with its reason and remedy (docs/calibration.md): 3 the solution's residuals or
 //! conditioning are poor (noise; views too alike); [`TOO_FEW_VIEWS`] fewer usable views than the

@@ -1,5 +1,5 @@
-//! A run from start to exit code. [`run`] reads top to bottom as the steps of a run: load and
-//! preflight; start the arm's side (the embedded stub); open and start the devices; start the
+//! A run from start to exit code. [`run`] is [`preflight`] then [`PreflightedRun::play`], which
+//! read top to bottom as the steps of a run: load and preflight; start the arm's side (the embedded stub); open and start the devices; start the
 //! capture path (recorder, perception, frame intake); connect the arm, identify it, enable it;
 //! plan the approach and the retreat around the lab's obstacles; play on the real-time thread
 //! (with `--closed-loop`, beside the closed loop's navigator, `crate::closed_loop`); stop the
@@ -7,8 +7,9 @@
 //! blocks happens here, before or after the loop; the loop itself is [`crate::control::tick`], which
 //! borrows the devices this module owns.
 //!
-//! - [`prepare`]: load, time-parametrise and preflight; plan the approach and the retreat, checked
-//!   by the same rules;
+//! - [`prepare`]: load (or take in memory, [`TrajectorySource`]), time-parametrise and preflight,
+//!   once per run ([`preflight`], before [`PreflightedRun::play`]); plan the approach and the
+//!   retreat, checked by the same rules;
 //! - [`arm_link`]: the arm's address, identity, report reader, first report, the embedded stub;
 //! - [`devices`]: the target scene, the recorder, late frames (the devices themselves are opened
 //!   by `crate::devices`, which is the only place that names drivers);
@@ -389,7 +390,8 @@ fn play_prepared(req: RunRequest, prepared: Prepared) -> Result<RunReport, RunEr
     // 4. The capture path: recorder, perception worker, frame intake.
     let capture = CapturePath::start(&req, &prepared, &scene, &runtime)?;
 
-    // 5. The arm: connect, identify and preflight against its joint table, read, enable.
+    // 5. The arm: connect, identify (its joint table, when tighter, checked against the joint
+    // positions), read, enable.
     let mut link = connect_arm(&req, &target, traj, table, clock.clone())?;
 
     // 6. The program: the approach from where the arm stands, the trajectory, the retreat to rest;

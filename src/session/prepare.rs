@@ -45,7 +45,7 @@ pub(super) struct Provenance {
     pub name: String,
     /// SHA-256 of the file's bytes, or of the NPZ bytes an in-memory trajectory would be saved
     /// as (`npz::to_bytes`, compressed: what `hitl calibrate` used to write); hex, empty when
-    /// parking.
+    /// parking (and for a file when nothing is recorded).
     pub sha256: String,
 }
 
@@ -79,9 +79,12 @@ fn load(req: &RunRequest) -> Result<(Trajectory, Provenance), RunError> {
             for warning in &loaded.warnings {
                 crate::errln!("warning: {warning}");
             }
-            // The file's bytes as they are now (read again only for the recording's hash).
-            let bytes = std::fs::read(path).unwrap_or_default();
-            let source = Provenance::of_bytes(path.display().to_string(), &bytes);
+            // The file's bytes, read again only for a recording's hash.
+            let name = path.display().to_string();
+            let source = match &req.record {
+                Some(_) => Provenance::of_bytes(name, &std::fs::read(path).unwrap_or_default()),
+                None => Provenance { name, sha256: String::new() },
+            };
             Ok((loaded.trajectory, source))
         }
         TrajectorySource::InMemory { trajectory, name } => {
