@@ -104,6 +104,12 @@ fn calibrate_recovers_the_hidden_lab_and_refuses_what_it_cannot_solve() {
     let rec = hitl_record::reader::read_recording(&record).expect("the recording reads");
     // One `/tf` per capture: one per view.
     assert_eq!(rec.tf.len() as u32, cal.views, "flange poses recorded");
+    // The views were handed to the run in memory (no file written): the recording names them
+    // and the hash of the NPZ they would be.
+    let run_md = &rec.metadata["run"];
+    let config: serde_json::Value = serde_json::from_str(&run_md["config"]).expect("config");
+    assert_eq!(config["trajectory"], "calibration views (planned by hitl calibrate)");
+    assert_eq!(run_md["trajectory_sha256"].len(), 64, "{:?}", run_md["trajectory_sha256"]);
     let truth_in_camera = |lab: &LabConfig, base_flange: &nalgebra::Isometry3<f64>| {
         (base_flange * lab.camera_mount()).inverse() * lab.target_in_base()
     };

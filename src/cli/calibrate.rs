@@ -7,9 +7,10 @@
 //! flange poses the recording holds (forward kinematics of the joints at exposure) and writes the
 //! lab configuration with the recovered camera mount and target pose and a `[calibration]`
 //! provenance block, atomically (a temporary file renamed into place: a refusal leaves nothing).
-//! The views' trajectory and recording live in a temporary folder removed on exit unless
-//! `--record` keeps the recording; `--from-recording` solves such a recording again without
-//! moving anything (other thresholds, a corrected board definition).
+//! The views' trajectory is handed to the session in memory (never written to a file); the
+//! recording lives in a temporary folder removed on exit unless `--record` keeps it;
+//! `--from-recording` solves such a recording again without moving anything (other thresholds, a
+//! corrected board definition).
 //!
 //! Refusals, each with its reason and remedy (docs/calibration.md): 3 the solution's residuals or
 //! conditioning are poor (noise; views too alike); [`TOO_FEW_VIEWS`] fewer usable views than the
@@ -21,7 +22,7 @@
 use crate::cli::device_flags::{DeviceFlags, LabFlags, Labs, Refusal, SimCameraFlags};
 use crate::exit;
 use crate::rt::RtOptions;
-use crate::session::{self, ArmTarget, RunRequest};
+use crate::session::{self, ArmTarget, RunRequest, TrajectorySource};
 use foxglove::messages as fg;
 use hitl_calib::board::{load_board_file, Board};
 use hitl_calib::solve::{self, Acceptance, SolveError, View};
@@ -30,8 +31,6 @@ use hitl_hal::Intrinsics;
 use hitl_perception::{BackendSpec, ReregisterPolicy};
 use hitl_record::{reader, topics};
 use hitl_trajectories::lab::{BoardPlacement, CalibrationProvenance, LabConfig};
-use hitl_trajectories::preflight;
-use hitl_trajectories::timing::SetpointTable;
 use nalgebra::Isometry3;
 use std::io::IsTerminal;
 use std::ops::ControlFlow;
@@ -320,16 +319,15 @@ fn calibrated_lab(
     Ok(text)
 }
 
-/// The views' trajectory: planned in `lab_with_board`, each view solved and in view, and
-/// preflighted in the controller's `lab`; refused before anything moves if too few views are
-/// reachable or the preflight refuses them.
+/// The views' trajectory, planned in `lab_with_board`, each view solved and in view; refused
+/// before anything moves if too few views are reachable. Its preflight is the run's
+/// ([`session::preflight`], in [`play_views`]): one check of the trajectory per run.
 fn planned_views(
     args: &CalibrateArgs,
     lab_with_board: &LabConfig,
-    lab: &LabConfig,
     board: &Board,
     k: &Intrinsics,
-) -> Result<hitl_trajectories::Trajectory, Refusal> {
+) -> Result<(hitl_trajectories::Trajectory, usize), Refusal> {
     let plan = ViewPlan { count: args.views, ..ViewPlan::default() };
     let (planned, dropped) = views::plan_views(lab_with_board, board, k, &plan);
     for d in &dropped {
@@ -347,28 +345,19 @@ fn planned_views(
             ),
         );
     }
-    let traj = views::trajectory(&planned, lab_with_board, &plan);
-    let table = SetpointTable::build(&traj, 250.0, 1.0)
-        .map_err(|e| Refusal(exit::BAD_INPUT, format!("timing the views' trajectory: {e}")))?;
-    let report = preflight::check(&traj, &table, lab);
-    if !report.is_safe() {
-        let lines: Vec<String> = report.violations.iter().map(|v| v.message.clone()).collect();
-        return refuse(
-            exit::PREFLIGHT_REFUSED,
-            format!(
-                "preflight refused the views' trajectory; nothing moved:\n{}",
-                lines.join("\n")
-            ),
-        );
-    }
-    crate::outln!(
-        "calibration: {} views of {}, {:.1} s of motion",
-        planned.len(),
-        board.describe(),
-        traj.duration()
-    );
+    Ok((views::trajectory(&planned, lab_with_board, &plan), planned.len()))
+}
 
-    Ok(traj)
+/// The views' run preflighted in the controller's lab (every rule over its setpoints, the
+/// camera's capture rate included); a refusal said as the views' (exit 3, nothing moved).
+fn preflight_views(request: RunRequest) -> Result<session::PreflightedRun, Refusal> {
+    session::preflight(request).map_err(|e| match e {
+        session::RunError::Refused(lines) => Refusal(
+            exit::PREFLIGHT_REFUSED,
+            format!("preflight refused the views' trajectory; nothing moved:\n{lines}"),
+        ),
+        e => Refusal(e.exit_code(), e.to_string()),
+    })
 }
 
 /// Plans the views (refused before anything moves if too few are reachable with the board whole
@@ -406,24 +395,21 @@ fn play_views(
         stub_lab = Some(lab_with_board.clone());
     }
 
-    // 1. The views, each solved and in view, preflighted; refused before anything moves.
-    let traj = planned_views(args, &lab_with_board, lab, board, k)?;
-    let npz = dir.join("calibration-views.npz");
-    hitl_trajectories::npz::save(&npz, &traj, true)
-        .map_err(|e| Refusal(exit::BAD_INPUT, format!("writing the views' trajectory: {e}")))?;
+    // 1. The views, each solved and in view; refused before anything moves.
+    let (traj, count) = planned_views(args, &lab_with_board, board, k)?;
 
-    // 2. Play them through the run session, recording the captures.
+    // 2. The run that plays them, recording the captures: handed the trajectory in memory,
+    // preflighted before the operator confirms a real arm.
     let record = args.record.clone().unwrap_or_else(|| dir.join("calibration.mcap"));
     let target = match &args.devices.arm {
         None => ArmTarget::Stub { faults: Vec::new() },
-        Some(host) => {
-            args.labs.confirm_real_arm(host)?;
-            ArmTarget::Remote { host: host.clone() }
-        }
+        Some(host) => ArmTarget::Remote { host: host.clone() },
     };
     let request = RunRequest {
-        trajectory: npz.clone(),
-        waypoint_rate_hz: None,
+        trajectory: TrajectorySource::InMemory {
+            trajectory: Box::new(traj),
+            name: "calibration views (planned by hitl calibrate)".into(),
+        },
         lab: lab.clone(),
         rate_hz: 250.0,
         speed_scale: 1.0,
@@ -449,14 +435,22 @@ fn play_views(
         rt: RtOptions::with_priority(args.rt_priority),
         // Back to the rest pose after the views, as every completed run.
         retreat: true,
-        park: false,
         stub_start_q: None,
         plain_progress: args.plain || !std::io::stderr().is_terminal(),
         live: None,
         closed_loop: None,
         clock: args.clock,
     };
-    match session::run(request) {
+    let run = preflight_views(request)?;
+    crate::outln!(
+        "calibration: {count} views of {}, {:.1} s of motion",
+        board.describe(),
+        run.trajectory().duration()
+    );
+    if let Some(host) = &args.devices.arm {
+        args.labs.confirm_real_arm(host)?;
+    }
+    match run.play() {
         Ok(r) if r.exit_code == exit::OK => {}
         Ok(r) => {
             return refuse(

@@ -9,7 +9,7 @@ use crate::cli::device_flags::{DeviceFlags, LabFlags, Refusal};
 use crate::devices::{CameraSpec, LightSpec, TriggerSpec};
 use crate::exit;
 use crate::rt::RtOptions;
-use crate::session::{self, ArmTarget, RunRequest};
+use crate::session::{self, ArmTarget, RunRequest, TrajectorySource};
 use hitl_perception::{BackendSpec, ReregisterPolicy};
 use std::io::IsTerminal;
 use std::path::PathBuf;
@@ -66,8 +66,7 @@ pub fn run(args: ParkArgs) -> u8 {
         }
     };
     let request = RunRequest {
-        trajectory: PathBuf::new(),
-        waypoint_rate_hz: None,
+        trajectory: TrajectorySource::Park,
         lab: labs.controller,
         rate_hz: args.rate,
         speed_scale: 1.0,
@@ -90,7 +89,6 @@ pub fn run(args: ParkArgs) -> u8 {
         depth_model: Default::default(),
         rt: RtOptions::with_priority(args.rt_priority),
         retreat: true,
-        park: true,
         stub_start_q: args.stub_start_q,
         plain_progress: args.plain || !std::io::stderr().is_terminal(),
         live: None,

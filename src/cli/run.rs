@@ -10,7 +10,7 @@ use crate::cli::reregister::ReregisterArgs;
 use crate::devices::CameraSpec;
 use crate::exit;
 use crate::rt::RtOptions;
-use crate::session::{self, ArmTarget, ClockChoice, RunRequest, StubFault};
+use crate::session::{self, ArmTarget, ClockChoice, RunRequest, StubFault, TrajectorySource};
 use hitl_perception::BackendSpec;
 use hitl_record::live::DEFAULT_LIVE_ADDR;
 use hitl_record::{ChunkCompression, LiveConfig, RecorderConfig};
@@ -230,8 +230,10 @@ pub fn run(args: RunArgs, record: bool) -> u8 {
         CameraSpec::None => MaskSource::None,
     });
     let request = RunRequest {
-        trajectory: args.trajectory,
-        waypoint_rate_hz: args.waypoint_rate,
+        trajectory: TrajectorySource::File {
+            path: args.trajectory,
+            waypoint_rate_hz: args.waypoint_rate,
+        },
         lab,
         rate_hz: args.rate,
         speed_scale: args.speed_scale,
@@ -256,7 +258,6 @@ pub fn run(args: RunArgs, record: bool) -> u8 {
             ..RtOptions::with_priority(args.rt_priority)
         },
         retreat: !args.no_retreat,
-        park: false,
         stub_start_q: args.stub_start_q,
         plain_progress: args.plain || !std::io::stderr().is_terminal(),
         live: args.live.map(LiveConfig::new),

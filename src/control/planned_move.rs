@@ -154,8 +154,10 @@ pub fn plan_safe_move(
     let limits = approach_limits(lab);
     // A lab whose TCP speed limit the approach limits would break (a slow lab) gets the move
     // slowed down until it passes: velocity by the ratio, acceleration and jerk by its square and
-    // cube (a few tries, each confirmed by the full check).
+    // cube (a few tries, each confirmed by the full check). Still refused after them: the
+    // first try's violations (at the lab's own limits) say why, without asking again.
     let mut scale = 1.0;
+    let mut first_refusal = None;
     for _ in 0..4 {
         let scaled = MoveLimits {
             velocity: limits.velocity.map(|v| v * scale),
@@ -179,9 +181,9 @@ pub fn plan_safe_move(
             return Err(MoveRefused::Unsafe(violation_lines(&report)));
         }
         scale *= 0.95 * tcp.limit_m_s / tcp.peak_m_s;
+        first_refusal.get_or_insert_with(|| violation_lines(&report));
     }
-    let (_, report) = time_and_check(name, from, &path, &limits, lab, rate_hz)?;
-    Err(MoveRefused::Unsafe(violation_lines(&report)))
+    Err(MoveRefused::Unsafe(first_refusal.unwrap_or_default()))
 }
 
 fn violation_lines(report: &PreflightReport) -> String {

@@ -67,9 +67,11 @@ pub(super) fn lab_for_arm(lab: &LabConfig, identity: &ArmIdentity) -> LabConfig 
     arm_lab
 }
 
-/// On connect, before anything moves: read the arm's identity, print it, and preflight the
-/// trajectory again against the tighter of the lab's and the arm's joint tables (exit 3 naming
-/// the joint and the table). Returns the lab the approach must be planned and checked in.
+/// On connect, before anything moves: read the arm's identity, print it, and, when the arm's
+/// joint table is tighter than the lab's, ask the one question the table changes again: the
+/// trajectory's joint positions against it (exit 3 naming the joint and the table; every other
+/// rule's answer from [`super::prepare`] stands). Returns the lab the approach must be planned
+/// and checked in.
 pub(super) fn identify_and_check(
     arm: &mut RunArm,
     lab: &LabConfig,
@@ -86,13 +88,16 @@ pub(super) fn identify_and_check(
         lab.arm.joint_table,
         arm_lab.arm.joint_table
     );
-    let report = preflight::check(traj, table, &arm_lab);
-    if !report.is_safe() {
+    if arm_lab.arm.joint_table == lab.arm.joint_table {
+        return Ok(arm_lab);
+    }
+    let refused = preflight::check_joint_limits(table, traj.len(), &arm_lab);
+    if !refused.is_empty() {
         return Err(RunError::Refused(format!(
             "the connected arm (serial {}) enforces joint table {}:\n{}",
             identity.serial,
             identity.table,
-            violations(&report)
+            violations(&refused)
         )));
     }
     Ok(arm_lab)

@@ -2,6 +2,7 @@
 //! recorder (with the run's choices in its metadata), and the frames still on their way after
 //! the loop. Opening the devices is `crate::devices`.
 
+use super::prepare::Provenance;
 use super::{ArmTarget, RunError, RunRequest};
 use crate::capture::sink::IntakeQueues;
 use crate::devices::RunCamera;
@@ -12,7 +13,6 @@ use hitl_record::{
     Telemetry,
 };
 use hitl_trajectories::Trajectory;
-use sha2::Digest as _;
 use std::sync::atomic::Ordering;
 use std::time::{Duration, Instant};
 
@@ -42,6 +42,7 @@ pub(super) fn target_scene(req: &RunRequest, traj: &Trajectory) -> Result<Target
 pub(super) fn start_recorder(
     req: &RunRequest,
     traj: &Trajectory,
+    source: &Provenance,
     scale: f64,
     live: Option<LiveTap>,
 ) -> Result<Option<(RecorderHandle, Telemetry)>, RunError> {
@@ -50,13 +51,11 @@ pub(super) fn start_recorder(
         std::fs::create_dir_all(dir)
             .map_err(|e| RunError::BadInput(format!("cannot create {}: {e}", dir.display())))?;
     }
-    let bytes = std::fs::read(&req.trajectory).unwrap_or_default();
-    let sha = sha2::Sha256::digest(&bytes);
     let mut versions = std::collections::BTreeMap::new();
     versions.insert("hitl".to_string(), env!("CARGO_PKG_VERSION").to_string());
     let meta = RunMetadata {
         config: serde_json::json!({
-            "trajectory": req.trajectory.display().to_string(),
+            "trajectory": source.name,
             "rate_hz": req.rate_hz,
             "speed_scale": req.speed_scale,
             "camera": req.camera.to_string(),
@@ -79,7 +78,7 @@ pub(super) fn start_recorder(
             },
         })
         .to_string(),
-        trajectory_sha256: sha.iter().map(|b| format!("{b:02x}")).collect(),
+        trajectory_sha256: source.sha256.clone(),
         trajectory_meta: traj.meta.clone().unwrap_or_default(),
         lab_config: req.lab.to_toml(),
         calibration: req.lab.calibration_name(),

@@ -1,5 +1,5 @@
-//! A run from start to exit code. [`run`] reads top to bottom as the steps of a run: load and
-//! preflight; start the arm's side (the embedded stub); open and start the devices; start the
+//! A run from start to exit code. [`run`] is [`preflight`] then [`PreflightedRun::play`], which
+//! read top to bottom as the steps of a run: load and preflight; start the arm's side (the embedded stub); open and start the devices; start the
 //! capture path (recorder, perception, frame intake); connect the arm, identify it, enable it;
 //! plan the approach and the retreat around the lab's obstacles; play on the real-time thread
 //! (with `--closed-loop`, beside the closed loop's navigator, `crate::closed_loop`); stop the
@@ -7,8 +7,9 @@
 //! blocks happens here, before or after the loop; the loop itself is [`crate::control::tick`], which
 //! borrows the devices this module owns.
 //!
-//! - [`prepare`]: load, time-parametrise and preflight; plan the approach and the retreat, checked
-//!   by the same rules;
+//! - [`prepare`]: load (or take in memory, [`TrajectorySource`]), time-parametrise and preflight,
+//!   once per run ([`preflight`], before [`PreflightedRun::play`]); plan the approach and the
+//!   retreat, checked by the same rules;
 //! - [`arm_link`]: the arm's address, identity, report reader, first report, the embedded stub;
 //! - [`devices`]: the target scene, the recorder, late frames (the devices themselves are opened
 //!   by `crate::devices`, which is the only place that names drivers);
@@ -64,7 +65,7 @@ use hitl_trajectories::lab::LabConfig;
 use hitl_trajectories::timing::SetpointTable;
 use hitl_trajectories::Trajectory;
 use operator::install_ctrlc;
-use prepare::{plan_move_between, prepare};
+use prepare::{plan_move_between, prepare, Prepared, Provenance};
 use std::net::{IpAddr, SocketAddr};
 use std::path::PathBuf;
 use std::sync::atomic::{AtomicBool, Ordering};
@@ -104,12 +105,24 @@ pub enum ArmTarget {
     Remote { host: String },
 }
 
+/// What a run plays: a file, a trajectory already in memory, or (parking) nothing.
+#[derive(Debug, Clone)]
+pub enum TrajectorySource {
+    /// An NPZ file, loaded and validated before anything opens (a bad file: exit 2 naming it).
+    /// `waypoint_rate_hz`: waypoints per second of a file without `t` (`--waypoint-rate`).
+    File { path: PathBuf, waypoint_rate_hz: Option<f64> },
+    /// A trajectory its caller built (`hitl calibrate`'s views), validated as a file would be;
+    /// `name` says what it is in the recording's metadata, where a file's path would stand.
+    InMemory { trajectory: Box<Trajectory>, name: String },
+    /// `hitl park`: no trajectory; the only motion is the retreat from wherever the arm stands to
+    /// the rest pose.
+    Park,
+}
+
 /// Everything `hitl run` was asked.
 #[derive(Debug, Clone)]
 pub struct RunRequest {
-    pub trajectory: PathBuf,
-    /// Waypoints per second of a file without `t` (`--waypoint-rate`).
-    pub waypoint_rate_hz: Option<f64>,
+    pub trajectory: TrajectorySource,
     pub lab: LabConfig,
     pub rate_hz: f64,
     pub speed_scale: f64,
@@ -141,9 +154,6 @@ pub struct RunRequest {
     /// After a completed run, go back to the lab's rest pose (`[arm] rest_q`) along a planned,
     /// checked path (`--no-retreat`: false, the arm stays where the trajectory ends).
     pub retreat: bool,
-    /// `hitl park`: no trajectory (`trajectory` is not read); the only motion is the retreat from
-    /// wherever the arm stands to the rest pose.
-    pub park: bool,
     /// SITL: where the embedded stub's arm powers up (`--stub-start-q`), e.g. where a previous
     /// run left a real arm; `None`: the stub's own power-up pose.
     pub stub_start_q: Option<Joints>,
@@ -155,6 +165,13 @@ pub struct RunRequest {
     pub closed_loop: Option<ClosedLoopConfig>,
     /// The host's clock, or simulated time in lockstep with the embedded stub (`--clock`).
     pub clock: ClockChoice,
+}
+
+impl RunRequest {
+    /// `hitl park`: nothing to play but the retreat to the rest pose.
+    fn parks(&self) -> bool {
+        matches!(self.trajectory, TrajectorySource::Park)
+    }
 }
 
 /// A run that could not start (nothing moved), or a device that failed before the loop.
@@ -310,19 +327,54 @@ impl RunReport {
     }
 }
 
-/// Play `req` and say how it ended. Each line is one step of the run.
+/// Play `req` and say how it ended: [`preflight`], then [`PreflightedRun::play`].
 pub fn run(req: RunRequest) -> Result<RunReport, RunError> {
+    preflight(req)?.play()
+}
+
+/// A request whose trajectory is loaded, time-parametrised and preflighted (every rule over its
+/// setpoints, captures against the camera's rate): what [`PreflightedRun::play`] plays. Made only
+/// by [`preflight`], so a played trajectory is always one checked for its own request.
+pub struct PreflightedRun {
+    req: RunRequest,
+    prepared: Prepared,
+}
+
+/// Step 1 of a run, before anything is opened: the clock choice, the trajectory (parking: the
+/// rest pose alone) loaded, timed and preflighted; refused here, nothing has moved or opened.
+/// `hitl calibrate` calls it apart from [`PreflightedRun::play`], to say a refusal in its own
+/// words before the operator confirms a real arm.
+pub fn preflight(req: RunRequest) -> Result<PreflightedRun, RunError> {
+    check_clock_choice(&req)?;
+    let prepared = if req.parks() { park_target(&req)? } else { prepare(&req)? };
+    Ok(PreflightedRun { req, prepared })
+}
+
+impl PreflightedRun {
+    /// The trajectory that will play.
+    pub fn trajectory(&self) -> &Trajectory {
+        &self.prepared.traj
+    }
+
+    /// Play the preflighted request and say how it ended. Each line is one step of the run.
+    pub fn play(self) -> Result<RunReport, RunError> {
+        let PreflightedRun { req, prepared } = self;
+        play_prepared(req, prepared)
+    }
+}
+
+/// The steps of a run after its preflight, top to bottom.
+fn play_prepared(req: RunRequest, prepared: Prepared) -> Result<RunReport, RunError> {
     // Ctrl-C from the very start: during setup it stops the run at its first tick, with no motion.
     let operator_stop = Arc::new(AtomicBool::new(false));
     install_ctrlc(&operator_stop);
+    let (traj, table) = (&prepared.traj, &prepared.table);
 
-    // 1. Before anything is opened: the trajectory (parking: the rest pose alone), the target, the
-    // estimator choice.
-    check_clock_choice(&req)?;
-    let (traj, table) = if req.park { park_target(&req)? } else { prepare(&req)? };
-    let scene = target_scene(&req, &traj)?;
+    // 1. Before anything is opened (the trajectory was preflighted): the target, the estimator
+    // choice.
+    let scene = target_scene(&req, traj)?;
     check_perception_choice(&req)?;
-    let plan_frame = closed_loop_frame(&req, &traj)?;
+    let plan_frame = closed_loop_frame(&req, traj)?;
     let clock = match req.clock {
         ClockChoice::Realtime => MonotonicClock::new(),
         ClockChoice::Sim => MonotonicClock::simulated(SimTime::new()),
@@ -330,24 +382,25 @@ pub fn run(req: RunRequest) -> Result<RunReport, RunError> {
     let runtime = io_runtime()?;
 
     // 2. The arm's side: the embedded stub, or the real box's address.
-    let target = start_arm_target(&req, &scene, &traj, &table)?;
+    let target = start_arm_target(&req, &scene, traj, table)?;
 
     // 3. Devices besides the arm, opened, configured and started before the arm is enabled.
     let mut devices = open_and_start_devices(&req, &target, runtime.handle(), clock.clone())?;
 
     // 4. The capture path: recorder, perception worker, frame intake.
-    let capture = CapturePath::start(&req, &traj, &scene, &runtime)?;
+    let capture = CapturePath::start(&req, &prepared, &scene, &runtime)?;
 
-    // 5. The arm: connect, identify and preflight against its joint table, read, enable.
-    let mut link = connect_arm(&req, &target, &traj, &table, clock.clone())?;
+    // 5. The arm: connect, identify (its joint table, when tighter, checked against the joint
+    // positions), read, enable.
+    let mut link = connect_arm(&req, &target, traj, table, clock.clone())?;
 
     // 6. The program: the approach from where the arm stands, the trajectory, the retreat to rest;
     // each planned move is recorded with the run.
     let retreat_to = req.retreat.then_some(link.lab.arm.rest_q);
-    let (program, moves) = if req.park {
-        build_park_program(&link.first.q, &table, &link.lab)?
+    let (program, moves) = if req.parks() {
+        build_park_program(&link.first.q, table, &link.lab)?
     } else {
-        build_program(&link.first.q, &table, &link.lab, retreat_to.as_ref())?
+        build_program(&link.first.q, table, &link.lab, retreat_to.as_ref())?
     };
     let mut program = program;
     program.light_lead_ticks = light_lead_ticks(&req, table.rate_hz);
@@ -367,7 +420,7 @@ pub fn run(req: RunRequest) -> Result<RunReport, RunError> {
     let played = play(
         &req,
         &program,
-        &table,
+        table,
         &mut link,
         &mut devices,
         &capture,
@@ -446,7 +499,7 @@ fn check_perception_choice(req: &RunRequest) -> Result<(), RunError> {
 /// feed it; checked before anything opens (exit 2 otherwise).
 fn closed_loop_frame(req: &RunRequest, traj: &Trajectory) -> Result<Option<PlanFrame>, RunError> {
     let Some(cfg) = &req.closed_loop else { return Ok(None) };
-    if req.park {
+    if req.parks() {
         return Ok(None);
     }
     if req.perception == BackendSpec::None || req.camera == CameraSpec::None {
@@ -646,12 +699,13 @@ struct ClosedCapture {
 impl CapturePath {
     fn start(
         req: &RunRequest,
-        traj: &Trajectory,
+        prepared: &Prepared,
         scene: &TargetScene,
         runtime: &tokio::runtime::Runtime,
     ) -> Result<Self, RunError> {
+        let traj = &prepared.traj;
         let (live, tap) = start_live(req, runtime)?;
-        let recorder = start_recorder(req, traj, scene.scale, tap)?;
+        let recorder = start_recorder(req, traj, &prepared.source, scene.scale, tap)?;
         let (recorder, record) = match recorder {
             Some((h, t)) => (Some(h), Some(t)),
             None => (None, None),
@@ -925,7 +979,7 @@ fn build_program(
 
 /// `hitl park`'s stand-in for a trajectory: the rest pose held for one tick, so the steps of a run
 /// (the stub, the arm's identity check, the recording) have one to name.
-fn park_target(req: &RunRequest) -> Result<(Trajectory, SetpointTable), RunError> {
+fn park_target(req: &RunRequest) -> Result<Prepared, RunError> {
     prepare::check_rate(req)?;
     let rest = req.lab.arm.rest_q;
     let traj = Trajectory {
@@ -935,7 +989,7 @@ fn park_target(req: &RunRequest) -> Result<(Trajectory, SetpointTable), RunError
     };
     let table = SetpointTable::build(&traj, req.rate_hz, 1.0)
         .map_err(|e| RunError::BadInput(e.to_string()))?;
-    Ok((traj, table))
+    Ok(Prepared { traj, table, source: Provenance::none() })
 }
 
 /// `hitl park`'s program: nothing but the retreat from `start` to the rest pose.

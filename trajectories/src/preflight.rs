@@ -20,7 +20,10 @@
 //! ceiling and keep-outs (a lab config that puts the base too near a wall is refused too).
 //! Each rule is its own function over the setpoint profile (`Ticks`): `joint_limit_rule`,
 //! `joint_derivative_rule`, `tcp_speed_rule` and `clearance_rule`; `check_ticks` runs them in
-//! that order (one forward-kinematics pass feeds the last two).
+//! that order (one forward-kinematics pass feeds the last two). A run asks each question once:
+//! [`check`] over the file's setpoint table, [`check_move`] over each planned move (the approach,
+//! the retreat), and [`check_joint_limits`] alone when the connected arm's joint table is tighter
+//! than the lab's (the only rule a table changes).
 //!
 //! See `docs/preflight.md`.
 
@@ -195,30 +198,52 @@ impl MinTrack {
     }
 }
 
-/// Run every preflight rule over `table` (built from `traj`) in `lab`.
-pub fn check(traj: &Trajectory, table: &SetpointTable, lab: &LabConfig) -> PreflightReport {
-    let waypoint_of =
-        |tick: usize| table.waypoint_ticks.partition_point(|w| *w <= tick).saturating_sub(1);
-    let file = table.file_ticks();
-    // Where a tick is, for people: near a waypoint, or in a ramp.
-    let place = |tick: usize| {
-        if tick < file.start {
+/// Where a setpoint table's ticks lie, for the rules' messages: the waypoint segment of a tick,
+/// and in words near which waypoint or in which ramp.
+struct TablePlaces<'a> {
+    waypoint_ticks: &'a [usize],
+    file: std::ops::Range<usize>,
+    /// Waypoints in the file.
+    waypoints: usize,
+}
+
+impl<'a> TablePlaces<'a> {
+    fn new(table: &'a SetpointTable, waypoints: usize) -> Self {
+        Self { waypoint_ticks: &table.waypoint_ticks, file: table.file_ticks(), waypoints }
+    }
+
+    fn waypoint_of(&self, tick: usize) -> usize {
+        self.waypoint_ticks.partition_point(|w| *w <= tick).saturating_sub(1)
+    }
+
+    fn place(&self, tick: usize) -> String {
+        if tick < self.file.start {
             "in the lead-in, before waypoint 0".to_string()
-        } else if tick >= file.end {
-            format!("in the lead-out, after waypoint {}", traj.len().saturating_sub(1))
+        } else if tick >= self.file.end {
+            format!("in the lead-out, after waypoint {}", self.waypoints.saturating_sub(1))
         } else {
-            format!("near waypoint {}", waypoint_of(tick))
+            format!("near waypoint {}", self.waypoint_of(tick))
         }
-    };
-    let ticks = Ticks {
+    }
+}
+
+/// A setpoint table's ticks as the rules read them.
+fn table_ticks(table: &SetpointTable) -> Ticks<'_> {
+    Ticks {
         rate_hz: table.rate_hz,
         dt: table.dt,
         q: &table.q,
         qd: &table.qd,
         qdd: &table.qdd,
         jerk: &table.jerk,
-    };
-    let rules = check_ticks(&ticks, lab, &waypoint_of, &place);
+    }
+}
+
+/// Run every preflight rule over `table` (built from `traj`) in `lab`.
+pub fn check(traj: &Trajectory, table: &SetpointTable, lab: &LabConfig) -> PreflightReport {
+    let places = TablePlaces::new(table, traj.len());
+    let ticks = table_ticks(table);
+    let rules = check_ticks(&ticks, lab, &|k| places.waypoint_of(k), &|k| places.place(k));
     let mut warnings = Vec::new();
     let shared = table.captures.windows(2).filter(|w| w[0].tick == w[1].tick).count();
     if shared > 0 {
@@ -246,6 +271,27 @@ pub fn check(traj: &Trajectory, table: &SetpointTable, lab: &LabConfig) -> Prefl
         violations: rules.violations,
         warnings,
     }
+}
+
+/// Only the joint-limit rule over `table` (built from a file of `waypoints` waypoints) in `lab`:
+/// the one question a different joint table asks again (the connected arm's, when it is tighter
+/// than the lab's; every other rule's answer does not depend on the table). The violations are
+/// those [`check`] would give for joint limits, worded the same.
+pub fn check_joint_limits(
+    table: &SetpointTable,
+    waypoints: usize,
+    lab: &LabConfig,
+) -> Vec<Violation> {
+    let places = TablePlaces::new(table, waypoints);
+    let ticks = table_ticks(table);
+    let waypoint_of = |k| places.waypoint_of(k);
+    let place = |k| places.place(k);
+    let at = Locator { ticks: &ticks, waypoint_of: &waypoint_of, place: &place };
+    let mut violations = Vec::new();
+    for j in 0..DOF {
+        joint_limit_rule(&ticks, lab, j, &at, &mut violations);
+    }
+    violations
 }
 
 /// A planned move between two rests (the approach to a trajectory's first setpoint, the retreat
@@ -901,6 +947,25 @@ mod tests {
             v.message
         );
         assert_eq!(r.joint_table, "xarm7-current");
+    }
+
+    #[test]
+    fn the_joint_limits_alone_refuse_as_the_whole_check_does() {
+        let mut traj = comfortable(11, 0.2, 0.05);
+        for q in &mut traj.qpos[4..7] {
+            q[3] = -0.3;
+        }
+        let lab = LabConfig::default();
+        let table = SetpointTable::build(&traj, 250.0, 1.0).expect("table");
+        let whole = check(&traj, &table, &lab);
+        let limits: Vec<Violation> =
+            whole.violations.into_iter().filter(|v| v.rule == Rule::JointLimit).collect();
+        assert_eq!(limits.len(), 1);
+        assert_eq!(check_joint_limits(&table, traj.len(), &lab), limits);
+        // A motion inside every limit: nothing.
+        let calm = comfortable(11, 0.2, 0.05);
+        let table = SetpointTable::build(&calm, 250.0, 1.0).expect("table");
+        assert!(check_joint_limits(&table, calm.len(), &lab).is_empty());
     }
 
     #[test]
