@@ -31,24 +31,6 @@ impl Light for SimLight {
     }
 }
 
-/// The trajectory's RTN-to-base rotation (`meta.rtn_to_base`, rows, `v_base = M v_rtn`), if
-/// its metadata has a finite one.
-pub fn rtn_to_base(traj: &Trajectory) -> Option<Matrix3<f64>> {
-    let meta: serde_json::Value = serde_json::from_str(traj.meta.as_deref()?).ok()?;
-    let rows = meta.get("rtn_to_base")?.as_array()?;
-    let mut m = Matrix3::zeros();
-    for (r, row) in rows.iter().enumerate().take(3) {
-        for (c, v) in row.as_array()?.iter().enumerate().take(3) {
-            m[(r, c)] = v.as_f64()?;
-        }
-    }
-    // A rotation: finite and orthonormal (else the file's metadata is not the planner's).
-    let ok = rows.len() == 3
-        && m.iter().all(|x| x.is_finite())
-        && (m.transpose() * m - Matrix3::identity()).norm() < 1e-6;
-    ok.then_some(m)
-}
-
 /// The Sun's direction in the Hill frame's base-frame axes for a chaser in direction `rho`
 /// from the target (base frame) at oriented Sun phase `phase_deg`, with orbit normal `normal`
 /// (base frame): the direction at `phase_deg` from `rho` in the plane of `rho` and
@@ -79,7 +61,8 @@ pub fn sun_schedule(
     lab: &LabConfig,
 ) -> Vec<(u64, Vector3<f64>)> {
     let Some(phase) = &traj.sun_phase_deg else { return Vec::new() };
-    let m = rtn_to_base(traj).unwrap_or_else(mapping::default_rtn_to_base);
+    let m =
+        hitl_trajectories::planner::rtn_to_base(traj).unwrap_or_else(mapping::default_rtn_to_base);
     let normal = m.column(2).into_owned();
     let base = lab.base_in_lab();
     let mount = lab.camera_mount();
@@ -127,19 +110,5 @@ mod tests {
         }
         assert_eq!(sun_from_phase(&Vector3::zeros(), &n, 10.0), None);
         assert_eq!(sun_from_phase(&n, &n, 10.0), None);
-    }
-
-    #[test]
-    fn the_plans_rotation_is_read_from_its_metadata() {
-        let mut traj = Trajectory {
-            meta: Some(r#"{"rtn_to_base":[[0,1,0],[-1,0,0],[0,0,1]]}"#.into()),
-            ..Trajectory::default()
-        };
-        let m = rtn_to_base(&traj).expect("rotation");
-        assert_eq!(m * Vector3::x(), Vector3::new(0.0, -1.0, 0.0));
-        traj.meta = Some(r#"{"rtn_to_base":[[2,0,0],[0,1,0],[0,0,1]]}"#.into());
-        assert_eq!(rtn_to_base(&traj), None, "not a rotation");
-        traj.meta = Some("{}".into());
-        assert_eq!(rtn_to_base(&traj), None);
     }
 }

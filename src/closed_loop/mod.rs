@@ -59,7 +59,7 @@ impl PlanFrame {
                 .filter(|v| v.is_finite() && *v > 0.0)
                 .ok_or_else(|| why(&format!("has no positive `{key}`")))
         };
-        let rtn_to_base = crate::capture::sim_light::rtn_to_base(traj)
+        let rtn_to_base = hitl_trajectories::planner::rtn_to_base(traj)
             .ok_or_else(|| why("has no rotation `rtn_to_base`"))?;
         let target = meta
             .get("target_pos_base_m")

@@ -2,7 +2,9 @@
 //! of the camera, and the one place a camera kind is opened (a new kind is its driver plus one
 //! variant and one arm here).
 
-use super::any::{Kinds, RunCamera, Unmanaged};
+#[cfg(feature = "stub")]
+use super::any::Unmanaged;
+use super::any::{Kinds, RunCamera};
 use super::none::NoCamera;
 use super::{DeviceError, OpenContext};
 use hitl_drivers::light::{LightSpec, TriggerSpec};

@@ -25,6 +25,9 @@ mod devices;
 mod operator;
 mod prepare;
 mod progress;
+// Without the stub there is no simulated clock to run: its parts stay, unused, so the types the
+// session names exist in both builds.
+#[cfg_attr(not(feature = "stub"), allow(dead_code))]
 mod sim_clock;
 
 pub use sim_clock::{ClockChoice, SimStats};
@@ -606,7 +609,7 @@ fn start_arm_target(
             // plan's nadir, its Sun following the trajectory's Sun phase.
             let look = hitl_sim_stub::mjcf::SceneOptions {
                 kind: req.lab.scene.kind,
-                rtn_to_base: crate::capture::sim_light::rtn_to_base(traj)
+                rtn_to_base: hitl_trajectories::planner::rtn_to_base(traj)
                     .unwrap_or_else(hitl_trajectories::planner::mapping::default_rtn_to_base),
             };
             let stub = start_stub(
@@ -835,6 +838,10 @@ struct ArmLink {
     reader_stop: Arc<AtomicBool>,
     reader_thread: Option<std::thread::JoinHandle<()>>,
     /// How far the report reader has read (a simulated clock waits on it).
+    #[cfg_attr(
+        not(feature = "stub"),
+        allow(dead_code, reason = "only the stub's simulated clock waits on it")
+    )]
     reader_progress: Arc<sim_clock::ReaderProgress>,
     first: ArmState,
     /// The lab as this arm allows it (its joint table).
@@ -845,6 +852,10 @@ struct ArmLink {
 
 impl ArmLink {
     /// What a simulated clock's lockstep waits on.
+    #[cfg_attr(
+        not(feature = "stub"),
+        allow(dead_code, reason = "only the stub has a simulated clock")
+    )]
     fn watched(&self, capture: &CapturePath) -> sim_clock::Watched {
         sim_clock::Watched {
             commands_written: self.arm.written_counter(),
@@ -1080,6 +1091,7 @@ fn play(
     );
     #[cfg(not(feature = "stub"))]
     let _ = (target, turns);
+    #[cfg(feature = "stub")]
     let stop_planned = || planner.settled();
     #[cfg(feature = "stub")]
     let (sim_time, times) = (sim.as_ref().map(|(_, t)| t.clone()), &times);

@@ -27,10 +27,13 @@ use crate::capture::sink::IntakeQueues;
 use crate::closed_loop::lockstep::NavigatorTurns;
 #[cfg(feature = "stub")]
 use crate::devices::stub::EmbeddedStub;
+#[cfg(feature = "stub")]
 use crate::rt::World;
 use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
 use std::sync::Arc;
-use std::time::{Duration, Instant};
+use std::time::Duration;
+#[cfg(feature = "stub")]
+use std::time::Instant;
 
 /// Which time a run lives on (`--clock`, `[run] clock`).
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default, clap::ValueEnum, serde::Deserialize)]

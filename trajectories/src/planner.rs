@@ -12,6 +12,7 @@
 pub mod bench;
 pub mod mapping;
 mod meta;
+pub use meta::rtn_to_base;
 pub mod presets;
 pub mod schedule;
 

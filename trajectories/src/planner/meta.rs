@@ -1,10 +1,12 @@
 //! The `meta` JSON of a planned trajectory: every input needed to reproduce the plan and to map
 //! recorded frames back to real metres. Fields are written in a fixed order and hold no clock or
-//! version, so the same plan gives the same bytes.
+//! version, so the same plan gives the same bytes. [`rtn_to_base`] reads the plan's rotation back.
 
 use super::{OrbitPath, PlanRequest, ScaleSource, Timing};
 use crate::lab::LabConfig;
 use crate::orbit::MU_EARTH;
+use crate::Trajectory;
+use nalgebra::Matrix3;
 use serde::Serialize;
 
 #[derive(Serialize)]
@@ -95,4 +97,42 @@ pub(super) fn meta_json(req: &PlanRequest, lab: &LabConfig, path: &OrbitPath) ->
         capture_every: req.capture_every,
     };
     serde_json::to_string(&meta).unwrap_or_else(|e| format!("{{\"error\":\"{e}\"}}"))
+}
+
+/// The trajectory's RTN-to-base rotation (`meta.rtn_to_base`, rows, `v_base = M v_rtn`), if
+/// its metadata has a finite one.
+pub fn rtn_to_base(traj: &Trajectory) -> Option<Matrix3<f64>> {
+    let meta: serde_json::Value = serde_json::from_str(traj.meta.as_deref()?).ok()?;
+    let rows = meta.get("rtn_to_base")?.as_array()?;
+    let mut m = Matrix3::zeros();
+    for (r, row) in rows.iter().enumerate().take(3) {
+        for (c, v) in row.as_array()?.iter().enumerate().take(3) {
+            m[(r, c)] = v.as_f64()?;
+        }
+    }
+    // A rotation: finite and orthonormal (else the file's metadata is not the planner's).
+    let ok = rows.len() == 3
+        && m.iter().all(|x| x.is_finite())
+        && (m.transpose() * m - Matrix3::identity()).norm() < 1e-6;
+    ok.then_some(m)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use nalgebra::Vector3;
+
+    #[test]
+    fn the_plans_rotation_is_read_from_its_metadata() {
+        let mut traj = Trajectory {
+            meta: Some(r#"{"rtn_to_base":[[0,1,0],[-1,0,0],[0,0,1]]}"#.into()),
+            ..Trajectory::default()
+        };
+        let m = rtn_to_base(&traj).expect("rotation");
+        assert_eq!(m * Vector3::x(), Vector3::new(0.0, -1.0, 0.0));
+        traj.meta = Some(r#"{"rtn_to_base":[[2,0,0],[0,1,0],[0,0,1]]}"#.into());
+        assert_eq!(rtn_to_base(&traj), None, "not a rotation");
+        traj.meta = Some("{}".into());
+        assert_eq!(rtn_to_base(&traj), None);
+    }
 }
