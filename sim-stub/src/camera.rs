@@ -18,9 +18,10 @@
 //! ([`NoiseModel`]: the Orbbec model passes over every pixel) and delivers the frame, so the next
 //! capture renders while the last one is read out (issue 23: 10 Hz at 1280x800). A render
 //! backlog therefore delays delivery, never moves the exposure away from its trigger; the queue
-//! of exposures is deep ([`EXPOSURE_QUEUE`]), and only a full one refuses the capture (`Busy`). Next to each frame it keeps a [`RenderTruth`] (the joints it rendered
-//! at, the camera pose with and without noise) for ground truth: [`SimCamera::poll_sim_frame`]
-//! returns both, [`SimCamera::last_truth`] gives the truth of the frame `poll_frame` returned last.
+//! of exposures is deep ([`EXPOSURE_QUEUE`]), and only a full one refuses the capture (`Busy`).
+//! Next to each frame it keeps a [`RenderTruth`] (the joints it rendered at, the camera pose with
+//! and without noise) for ground truth: [`SimCamera::poll_sim_frame`] returns both,
+//! [`SimCamera::last_truth`] gives the truth of the frame `poll_frame` returned last.
 //!
 //! Clocks: `exposure_ns` is the host monotonic clock given in [`SimCameraConfig::clock`] (share
 //! the controller's); `device_ns` is the plant's simulated time at the exposure, in nanoseconds.
