@@ -16,10 +16,12 @@
 //! thread then renders that exposure with its own `MjData`, however late it gets to it (the
 //! readout), and hands the image to a readout thread that applies the depth model
 //! ([`NoiseModel`]: the Orbbec model passes over every pixel) and delivers the frame, so the next
-//! capture renders while the last one is read out (issue 23: 10 Hz at 1280x800). A render backlog therefore delays delivery, never moves the exposure away from
-//! its trigger; a full queue refuses the capture (`Busy`). Next to each frame it keeps a [`RenderTruth`] (the joints it rendered
-//! at, the camera pose with and without noise) for ground truth: [`SimCamera::poll_sim_frame`]
-//! returns both, [`SimCamera::last_truth`] gives the truth of the frame `poll_frame` returned last.
+//! capture renders while the last one is read out (issue 23: 10 Hz at 1280x800). A render
+//! backlog therefore delays delivery, never moves the exposure away from its trigger; the queue
+//! of exposures is deep ([`EXPOSURE_QUEUE`]), and only a full one refuses the capture (`Busy`).
+//! Next to each frame it keeps a [`RenderTruth`] (the joints it rendered at, the camera pose with
+//! and without noise) for ground truth: [`SimCamera::poll_sim_frame`] returns both,
+//! [`SimCamera::last_truth`] gives the truth of the frame `poll_frame` returned last.
 //!
 //! Clocks: `exposure_ns` is the host monotonic clock given in [`SimCameraConfig::clock`] (share
 //! the controller's); `device_ns` is the plant's simulated time at the exposure, in nanoseconds.
@@ -115,11 +117,20 @@ pub struct SimCameraConfig {
     pub shading: Shading,
     /// Host clock for `exposure_ns` (share the controller's so stamps compare).
     pub clock: MonotonicClock,
-    /// Captures that may wait for the render thread; a trigger beyond this is refused.
+    /// Captures that may wait for the render thread; a trigger beyond this is refused. Each is
+    /// the exposure's few numbers (no image yet), so the default, [`EXPOSURE_QUEUE`], is deep.
     pub queue: usize,
     /// Counts captures taken and rendered (a host on a simulated clock waits until they match).
     pub backlog: RenderBacklog,
 }
+
+/// The default depth of the exposure queue: 6.4 s of captures at 10 Hz. A real camera exposes
+/// at every trigger and delivers every frame, whatever the host is doing; the simulated one
+/// exposes at the trigger too (the joints, the light and the clock are sampled there) but renders
+/// on this machine's cores, which other work (perception, the recorder, other processes) may hold
+/// for a while. Behind a deep queue a slow render delays frames instead of losing captures; the
+/// session collects the backlog after the loop (issue 23: no capture lost at 10 Hz).
+pub const EXPOSURE_QUEUE: usize = 64;
 
 /// Captures the camera has taken and the ones its render thread has finished (delivered or
 /// dropped); cheap to clone, readable from any thread.
@@ -155,7 +166,7 @@ impl Default for SimCameraConfig {
             noise: NoiseModel::default(),
             shading: Shading::default(),
             clock: MonotonicClock::new(),
-            queue: 4,
+            queue: EXPOSURE_QUEUE,
             backlog: RenderBacklog::default(),
         }
     }
@@ -245,7 +256,9 @@ impl SimCamera {
         }
         let (req_tx, req_rx) = channel::bounded(config.queue.max(1));
         let stream = Arc::new(AtomicCell::new(k));
-        let (frame_tx, frame_rx) = channel::bounded(config.queue.max(1) + 2);
+        // Rendered frames waiting for a poll (the tick polls every period): at most 8, 64 MB
+        // at 1280x800, however deep the exposure queue.
+        let (frame_tx, frame_rx) = channel::bounded(config.queue.clamp(1, 6) + 2);
         // One rendered image waits for the readout while the next renders.
         let (image_tx, image_rx) = channel::bounded::<Rendered>(1);
         let dropped = Arc::new(AtomicU64::new(0));

@@ -214,6 +214,37 @@ fn threaded_camera_renders_at_the_plant_joints() {
 }
 
 #[test]
+fn a_burst_of_captures_is_delivered_late_not_refused() {
+    // Twelve triggers back to back, faster than any render: with the default exposure queue
+    // every one is taken (a queue of 4 refused the fifth as busy) and every frame arrives, in
+    // order, each rendered at its own exposure.
+    let lab = LabConfig::default();
+    let mut plant = MujocoPlant::new(&lab, None).expect("plant");
+    plant.reset(&look_at_target(&lab, 0.3));
+    let config = SimCameraConfig { intrinsics: Preset::Wfov.at(160, 128), ..Default::default() };
+    assert!(config.queue >= 12, "exposure queue {}", config.queue);
+    let mut cam =
+        SimCamera::new(plant.lab_model(), plant.shared_state(), LightLevel::new(1.0), config)
+            .expect("camera");
+    cam.arm_trigger().expect("arm");
+    for tick in 0..12u64 {
+        assert_eq!(cam.trigger(CaptureRequest { tick, fired_ns: tick }), Ok(()), "capture {tick}");
+    }
+    let deadline = Instant::now() + Duration::from_secs(60);
+    let mut ticks = Vec::new();
+    while ticks.len() < 12 {
+        if let Some((frame, truth)) = cam.poll_sim_frame().expect("poll") {
+            assert_eq!(frame.request.tick, truth.tick);
+            ticks.push(frame.request.tick);
+        }
+        assert!(Instant::now() < deadline, "frames delivered: {ticks:?}");
+        std::thread::sleep(Duration::from_millis(1));
+    }
+    assert_eq!(ticks, (0..12).collect::<Vec<_>>());
+    assert_eq!(cam.dropped_frames(), 0);
+}
+
+#[test]
 fn the_exposure_is_taken_at_the_trigger_not_when_the_render_thread_gets_to_it() {
     let lab = LabConfig::default();
     let mut plant = MujocoPlant::new(&lab, None).expect("plant");

@@ -22,7 +22,8 @@ pub enum Which {
     /// real-time factor.
     Protocol,
     /// Simulated camera frames/s (colour + depth + mask) at 320x256, 1280x800 and 1280x1024 from
-    /// MuJoCo's renderer next to the ray cast, idle and with --load; trigger-to-frame latency.
+    /// MuJoCo's renderer next to the ray cast, idle and with --load; trigger-to-frame latency;
+    /// wall and CPU ms per 1280x800 frame of the render and of the Orbbec depth model.
     Render,
     /// Sustained recording of depth + colour at 30 fps plus 250 Hz telemetry, side by side with
     /// numpy savez_compressed per depth frame.

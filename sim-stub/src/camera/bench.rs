@@ -1,7 +1,8 @@
 //! The simulated camera's benchmark (`hitl bench render`): frames per second of colour + depth +
 //! mask from MuJoCo's renderer and from the ray cast, side by side in the same run, at 320x256,
 //! 1280x800 and 1280x1024, idle and (with `load`) with every core busy; and trigger-to-frame
-//! latency through [`SimCamera`].
+//! latency through [`SimCamera`]; and the wall and CPU time per frame of the camera's stages at
+//! 1280x800 (render, Orbbec depth model).
 
 use super::{
     capture_with, render_capture, DepthModel, FrameNoise, GlRenderer, LightLevel, NoiseModel,
@@ -118,26 +119,66 @@ fn figures(gl: &mut Option<GlRenderer>, ray: &mut Renderer, q: &Joints) -> serde
     serde_json::Value::Object(out)
 }
 
-/// Milliseconds the Orbbec depth model (`--depth-model orbbec`) takes over one 1280x800 frame
-/// of the scene (ray-cast once), as the camera's readout thread applies it: mean and smallest of
-/// five captures.
-fn depth_model_ms(ray: &mut Renderer, q: &Joints) -> serde_json::Value {
+/// CPU time this process has used so far (every thread, live or ended: user + system),
+/// milliseconds, from `/proc/self/stat` (10 ms resolution: measure over several frames); `None`
+/// off Linux. Next to wall time it says what a stage costs on a loaded machine, where wall time
+/// also counts the waits for a core.
+pub fn process_cpu_ms() -> Option<f64> {
+    let stat = std::fs::read_to_string("/proc/self/stat").ok()?;
+    // Fields after the command's closing parenthesis: utime and stime are the 12th and 13th.
+    let rest = stat.rsplit_once(')')?.1;
+    let mut fields = rest.split_whitespace().skip(11);
+    let ticks: f64 = fields.next()?.parse::<f64>().ok()? + fields.next()?.parse::<f64>().ok()?;
+    // USER_HZ is 100 on every Linux this runs on.
+    Some(ticks * 10.0)
+}
+
+/// Wall and CPU milliseconds per call of `stage` over `frames` calls (after one not counted).
+fn stage_ms(frames: u32, mut stage: impl FnMut(u64)) -> serde_json::Value {
+    stage(0);
+    let (t0, c0) = (Instant::now(), process_cpu_ms());
+    for tick in 1..=u64::from(frames) {
+        stage(tick);
+    }
+    let n = f64::from(frames.max(1));
+    let wall = t0.elapsed().as_secs_f64() * 1e3 / n;
+    let cpu = process_cpu_ms().zip(c0).map(|(c1, c0)| (c1 - c0) / n);
+    json!({ "wall_ms": wall, "cpu_ms": cpu, "frames": frames })
+}
+
+/// The simulated camera's stages at the Orbbec's 1280x800, one frame of the scene at a time:
+/// MuJoCo's render (colour, depth, mask: the render thread and the renderer's own threads), and
+/// the Orbbec depth model (`--depth-model orbbec`) as the readout thread applies it; wall and
+/// CPU milliseconds per frame (issue 23: both have 100 ms a frame at 10 Hz, on their own
+/// threads).
+fn stages_1280x800(
+    gl: &mut Option<GlRenderer>,
+    ray: &mut Renderer,
+    q: &Joints,
+) -> serde_json::Value {
     let intr = Preset::Orbbec.at(1280, 800);
-    let (image, _) = render_capture(ray, q, &intr, 1.0, &mut FrameNoise::none());
+    let mut depth = None;
+    let render = gl.as_mut().map(|gl| {
+        stage_ms(10, |_| {
+            if let Ok((image, _)) = capture_with(gl, q, &intr, 1.0, &mut FrameNoise::none()) {
+                depth = Some(image.depth_m);
+            }
+        })
+    });
+    let image = match depth {
+        Some(d) => d,
+        None => render_capture(ray, q, &intr, 1.0, &mut FrameNoise::none()).0.depth_m,
+    };
     let model = NoiseModel {
         depth_model: DepthModel::Orbbec(StereoDepth::GEMINI_305),
         ..NoiseModel::default()
     };
-    let times: Vec<f64> = (0..5u64)
-        .map(|tick| {
-            let mut depth = image.depth_m.clone();
-            let t0 = Instant::now();
-            model.draw(tick).apply_depth(&mut depth, &image.intrinsics);
-            t0.elapsed().as_secs_f64() * 1e3
-        })
-        .collect();
-    let mean = times.iter().sum::<f64>() / times.len() as f64;
-    json!({ "mean": mean, "min": times.iter().copied().fold(f64::INFINITY, f64::min) })
+    let mut copy = image.clone();
+    let depth_model = stage_ms(20, |tick| {
+        copy.copy_from_slice(&image);
+        model.draw(tick).apply_depth(&mut copy, &intr);
+    });
+    json!({ "mujoco_render": render, "orbbec_depth_model": depth_model })
 }
 
 /// Runs the closure it is handed with every core busy (the caller's load generator).
@@ -162,7 +203,7 @@ pub fn bench_render(under_load: Option<UnderLoad<'_>>) -> serde_json::Value {
         Err(e) => (None, Some(e.to_string())),
     };
     let idle = figures(&mut gl, &mut renderer, &q);
-    let depth_model = depth_model_ms(&mut renderer, &q);
+    let stages = stages_1280x800(&mut gl, &mut renderer, &q);
     let loaded = under_load.map(|run| {
         let mut f = serde_json::Value::Null;
         run(&mut || f = figures(&mut gl, &mut renderer, &q));
@@ -217,7 +258,7 @@ pub fn bench_render(under_load: Option<UnderLoad<'_>>) -> serde_json::Value {
         "loadavg_1m": loadavg,
         "idle": idle,
         "load": loaded,
-        "orbbec_depth_model_ms_1280x800": depth_model,
+        "stages_1280x800": stages,
         "trigger_to_frame_ms_320x256": { "p50": pct(0.5), "p99": pct(0.99), "n": latencies_ms.len() },
     })
 }

@@ -13,7 +13,7 @@ use hitl_hal::Intrinsics;
 use nalgebra::{UnitQuaternion, Vector3};
 use rand::rngs::Xoshiro256PlusPlus;
 use rand::SeedableRng;
-use rand_distr::{Distribution, Normal};
+use rand_distr::{Distribution, Normal, StandardNormal};
 
 /// Noise applied to a rendered frame. All zero (the default) renders a clean frame, as the
 /// paper's default noise level does.
@@ -200,11 +200,15 @@ impl FrameNoise {
 
 /// The Orbbec model on `depth`: pixels invalid at edges, in the projector's or the second
 /// camera's shadow, at grazing angles and nearer than the minimum range; the rest get
-/// N(0, (k z^2)^2) added, drawn in pixel order from `rng`.
+/// N(0, (k z^2)^2) added, drawn in pixel order from `rng` (rand_distr's Ziggurat
+/// `StandardNormal`, only for the pixels that keep a depth).
 ///
-/// Written for 1280x800 at 10 Hz on the stub's render path (issue 23): one pass per test over
-/// rows, the rays' x/z and y/z per column and row computed once, the grazing test without a
-/// square root or a division, the shadows' shifted columns once per row.
+/// Written for 1280x800 at 10 Hz on the simulated camera's readout thread (issue 23): one pass
+/// per test over rows, the rays' x/z and y/z per column and row computed once, the grazing test
+/// without a square root or a division, each row's shadows from both viewpoints while it is in
+/// cache, no library call per pixel ([`round`]), and in place: every test reads the rendered
+/// depth before the last pass writes over it, one pixel at a time (docs/sim-camera.md, "Where it
+/// runs", gives its time).
 fn stereo_depth(
     m: &StereoDepth,
     depth: &mut [f32],
@@ -215,30 +219,43 @@ fn stereo_depth(
     if w == 0 || h == 0 || depth.len() != w * h {
         return;
     }
-    let clean = depth.to_vec();
     let mut invalid = vec![false; w * h];
-    mark_edges(&clean, w, h, m.edge_jump, &mut invalid);
+    mark_edges(depth, w, h, m.edge_jump, &mut invalid);
     // Shadows: what a viewpoint `dx` metres along x cannot see.
     let mut scratch = ShadowRow::new(w);
-    for dx in [m.projector_x_m, m.baseline_m] {
-        if dx != 0.0 {
-            for v in 0..h {
-                let row = v * w..(v + 1) * w;
-                scratch.mark(&clean[row.clone()], intr.fx * dx, m.edge_jump, &mut invalid[row]);
+    for v in 0..h {
+        let row = v * w..(v + 1) * w;
+        for dx in [m.projector_x_m, m.baseline_m] {
+            if dx != 0.0 {
+                scratch.mark(
+                    &depth[row.clone()],
+                    intr.fx * dx,
+                    m.edge_jump,
+                    &mut invalid[row.clone()],
+                );
             }
         }
     }
-    mark_grazing(&clean, intr, m.grazing_deg, &mut invalid);
-    let Ok(unit) = Normal::new(0.0, 1.0) else { return };
+    mark_grazing(depth, intr, m.grazing_deg, &mut invalid);
     for (d, bad) in depth.iter_mut().zip(&invalid) {
         let zf = f64::from(*d);
         if *bad || zf.is_nan() || zf < m.min_range_m {
             *d = 0.0;
             continue;
         }
-        let noisy = zf + m.sigma_m(zf) * unit.sample(rng);
+        let unit: f64 = StandardNormal.sample(rng);
+        let noisy = zf + m.sigma_m(zf) * unit;
         *d = noisy.max(m.min_range_m) as f32;
     }
+}
+
+/// `x.round()` (half away from zero) without the C library call the x86-64 baseline (SSE2, no
+/// SSE4.1 `roundsd`) compiles it to: three a pixel, an eighth of the model's time (`perf`). The same
+/// value for every |x| < 2^53 except just below 0.5 (0.49999999999999994 gives 1), irrelevant
+/// to a pixel column; NaN gives 0.
+#[inline]
+fn round(x: f64) -> f64 {
+    ((x.abs() + 0.5) as i64 as f64).copysign(x)
 }
 
 /// Depth edges: a jump to the right or lower neighbour beyond `jump` of the nearer depth (or to
@@ -342,8 +359,8 @@ impl ShadowRow {
                     (lo, hi, near) = (s.min(t), s.max(t), a.min(b));
                 }
             }
-            let first = lo.round().max(0.0);
-            let last = hi.round().min(w as f64 - 1.0);
+            let first = round(lo).max(0.0);
+            let last = round(hi).min(w as f64 - 1.0);
             if first > last {
                 continue;
             }
@@ -356,13 +373,17 @@ impl ShadowRow {
             if a <= 0.0 {
                 continue;
             }
-            let c = shifted[u].round();
+            let c = round(shifted[u]);
             if c >= 0.0 && c < w as f64 && a > buf[c as usize] * (1.0 + jump) {
                 invalid[u] = true;
             }
         }
     }
 }
+
+#[cfg(test)]
+#[path = "noise_reference.rs"]
+mod reference;
 
 #[cfg(test)]
 mod tests {
