@@ -31,6 +31,9 @@ pub struct Drawn {
     pub silhouette_px: usize,
     /// Target pixels after the margin.
     pub mask_px: usize,
+    /// The drawn target's box before the margin, pixels (u0, v0, u1, v1 inclusive); none when
+    /// the target is out of view.
+    pub window: Option<[usize; 4]>,
 }
 
 /// Draws a target's silhouette, with fixed occluders, from any camera pose.
@@ -189,7 +192,7 @@ impl SilhouetteRenderer {
         if margin_px > 0 && silhouette_px > 0 {
             mask_px = self.grow(mask, w, h, &bx, margin_px);
         }
-        Drawn { silhouette_px, mask_px }
+        Drawn { silhouette_px, mask_px, window: Some([bx.u0, bx.v0, bx.u1, bx.v1]) }
     }
 
     /// The drawn surface's depth (metres along the camera axis) at pixel `idx`, valid after a

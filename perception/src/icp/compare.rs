@@ -38,6 +38,8 @@ pub struct Comparer {
     /// Scratch of [`Self::refine`]: drawn point, its surface normal, observed point.
     pairs: Vec<(Vector3<f64>, Vector3<f64>, Vector3<f64>)>,
     residuals: Vec<f64>,
+    /// The frame's target pixels' box ([`Self::prepare`]).
+    target_box: Option<[usize; 4]>,
     /// The tracker's model scale over the drawn mesh's.
     pub scale: f64,
 }
@@ -59,16 +61,35 @@ impl Comparer {
             normals,
             pairs: Vec::new(),
             residuals: Vec::new(),
+            target_box: None,
             scale: 1.0,
         })
     }
 
     /// Draws the target at `pose` (the mesh at the tracker's scale).
-    fn draw(&mut self, frame: &PerceptionFrame, pose: &Pose) {
+    fn draw(&mut self, frame: &PerceptionFrame, pose: &Pose) -> Option<[usize; 4]> {
         // The drawn mesh is the tracker's model over `scale`: the same image at the translation
         // over `scale`, its depths times `scale`.
         let at = Translation3::from(pose.translation.vector / self.scale) * pose.rotation;
-        self.renderer.draw(&at, &frame.intrinsics, 0, &mut self.drawn);
+        self.renderer.draw(&at, &frame.intrinsics, 0, &mut self.drawn).window
+    }
+
+    /// The box of the frame's target pixels (in the mask, with depth no farther than `far_m`),
+    /// pixels (u0, v0, u1, v1 inclusive); the tracker sets it once a frame ([`Self::prepare`]).
+    pub fn prepare(&mut self, frame: &PerceptionFrame, far_m: f64) {
+        let w = frame.intrinsics.width as usize;
+        let mut bx: Option<[usize; 4]> = None;
+        for i in (0..frame.depth_m.len()).filter(|&i| frame.is_target(i)) {
+            if f64::from(frame.depth_m[i]) > far_m {
+                continue;
+            }
+            let (u, v) = (i % w, i / w);
+            bx = Some(match bx {
+                None => [u, v, u, v],
+                Some([u0, v0, u1, v1]) => [u0.min(u), v0.min(v), u1.max(u), v1.max(v)],
+            });
+        }
+        self.target_box = bx;
     }
 
     /// The drawn surface's depth at pixel `i`, metres (infinite off the drawing).
@@ -101,11 +122,11 @@ impl Comparer {
         };
         let mut t = *init;
         for _ in 0..iters {
-            self.draw(frame, &t);
+            let window = self.draw(frame, &t);
             let mut pairs = std::mem::take(&mut self.pairs);
             pairs.clear();
             let r = t.rotation.to_rotation_matrix();
-            for (i, _) in self.drawn.iter().enumerate().filter(|(_, &d)| d == TARGET) {
+            for i in pixels(window, w).filter(|&i| self.drawn[i] == TARGET) {
                 let observed = f64::from(frame.depth_m[i]);
                 if !frame.is_target(i) || observed > far_m {
                     continue;
@@ -164,9 +185,18 @@ impl Comparer {
     /// when only one says target, or the depths differ by more than `tol` (drawn in front of the
     /// observed surface: free space; behind it: the frame sees something nearer).
     pub fn agreement(&mut self, frame: &PerceptionFrame, pose: &Pose, tol: f64, far_m: f64) -> f64 {
-        self.draw(frame, pose);
+        let window = self.draw(frame, pose);
+        let w = frame.intrinsics.width as usize;
         let (mut agree, mut disagree) = (0usize, 0usize);
-        for (i, &d) in self.drawn.iter().enumerate() {
+        // Off both boxes neither says target: only their union is looked at.
+        let union = match (window, self.target_box) {
+            (Some(a), Some(b)) => {
+                Some([a[0].min(b[0]), a[1].min(b[1]), a[2].max(b[2]), a[3].max(b[3])])
+            }
+            (a, b) => a.or(b),
+        };
+        for i in pixels(union, w) {
+            let d = self.drawn[i];
             let observed = f64::from(frame.depth_m[i]);
             let has_depth = observed.is_finite() && observed > 0.0;
             let in_mask = frame.in_silhouette(i);
@@ -196,4 +226,10 @@ impl Comparer {
         }
         agree as f64 / judged as f64
     }
+}
+
+/// The pixel indices of a box (u0, v0, u1, v1 inclusive) in an image `w` wide; none without one.
+fn pixels(window: Option<[usize; 4]>, w: usize) -> impl Iterator<Item = usize> {
+    let [u0, v0, u1, v1] = window.unwrap_or([1, 1, 0, 0]);
+    (v0..=v1).flat_map(move |v| (u0..=u1).map(move |u| v * w + u))
 }

@@ -564,6 +564,7 @@ impl PoseEstimator for IcpTracker {
         self.pixel_noise_tol = self.cfg.noise_sigmas * seen.noise_m;
         let seen_point_noise = seen.point_noise_m;
         self.far_m = seen.far_m;
+        self.comparer.prepare(frame, self.far_m);
         let scene = seen.points;
         if scene.len() < self.cfg.min_scene_points {
             return Ok(self.lose());
