@@ -75,7 +75,7 @@ impl Comparer {
     }
 
     /// The box of the frame's target pixels (in the mask, with depth no farther than `far_m`),
-    /// pixels (u0, v0, u1, v1 inclusive); the tracker sets it once a frame ([`Self::prepare`]).
+    /// pixels (u0, v0, u1, v1 inclusive); set before comparing on a frame ([`Self::prepare`]).
     pub fn prepare(&mut self, frame: &PerceptionFrame, far_m: f64) {
         let w = frame.intrinsics.width as usize;
         let mut bx: Option<[usize; 4]> = None;
