@@ -1,10 +1,11 @@
 //! Developer tool: re-runs the ICP tracker over a recording and prints the paper's metrics, the
 //! same figures as `hitl eval RUN.mcap --backend icp --json` without building the controller
 //! (tuning the tracker on recordings). `cargo run --release -p hitl-perception --example
-//! replay_icp -- RUN.mcap [TARGET]`.
+//! replay_icp -- RUN.mcap [TARGET]`. The figures come up to the target's declared symmetry too;
+//! `POLISH_POINTS=N` and `PIXEL_ITERS=N` set registration's last stage (0 points: off).
 
 use hitl_perception::icp::{IcpConfig, IcpTracker};
-use hitl_perception::metrics::{evaluate, PosePair};
+use hitl_perception::metrics::{evaluate_symmetric, PosePair};
 use hitl_perception::{PoseEstimator, TargetModel};
 use std::collections::BTreeMap;
 use std::path::PathBuf;
@@ -16,8 +17,19 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     let run = rec.metadata.get("run").ok_or("no run metadata")?;
     let scale: f64 = run.get("scale").ok_or("no scale")?.parse()?;
     let target = args.next().or_else(|| run.get("target_model").cloned()).unwrap_or_default();
-    let mesh = TargetModel::from_spec(&target)?.lab_mesh(scale)?;
-    let mut tracker = IcpTracker::new(&mesh, IcpConfig::default())?;
+    let model = TargetModel::from_spec(&target)?;
+    let mesh = model.lab_mesh(scale)?;
+    let mut cfg = IcpConfig::default();
+    if let Some(n) = std::env::var("POLISH_POINTS").ok().and_then(|n| n.parse().ok()) {
+        cfg.polish_points = n;
+    }
+    if let Some(n) = std::env::var("PIXEL_ITERS").ok().and_then(|n| n.parse().ok()) {
+        cfg.pixel_iters = n;
+    }
+    if let Some(n) = std::env::var("TRACK_PIXEL_ITERS").ok().and_then(|n| n.parse().ok()) {
+        cfg.track_pixel_iters = n;
+    }
+    let mut tracker = IcpTracker::new(&mesh, cfg)?;
     let gt: BTreeMap<u64, _> = rec.pose_gt.iter().map(|p| (p.capture_ns, p.pose)).collect();
     let mut est = BTreeMap::new();
     let t0 = std::time::Instant::now();
@@ -47,7 +59,13 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
             }
         }
     }
-    let m = evaluate(&pairs, scale)?;
-    println!("{} frames/s {:.2}", m.to_json(), est.len() as f64 / secs);
+    let first = pairs.iter().find_map(|p| p.est.map(|e| e.rotation.angle_to(&p.gt.rotation)));
+    let m = evaluate_symmetric(&pairs, scale, &model.symmetry_group)?;
+    println!(
+        "{} frames/s {:.2} frame0_raw_er_deg {:.3}",
+        m.to_json(),
+        est.len() as f64 / secs,
+        first.unwrap_or(f64::NAN).to_degrees()
+    );
     Ok(())
 }

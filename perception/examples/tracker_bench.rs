@@ -1,8 +1,10 @@
 //! Developer tool: the tracker bench (`hitl bench tracker`) without building the controller, for
 //! tuning the tracker. `cargo run --release -p hitl-perception --example tracker_bench --
 //! [ideal|orbbec] [sim|rendered] FRAMES TARGET...` at the Orbbec preset's 1280x800.
+//! `POLISH_POINTS=N` and `PIXEL_ITERS=N` set registration's last stage (0 points: off, the tracker before it).
 
-use hitl_perception::tracker_bench::{run, TrackerBenchOptions};
+use hitl_perception::icp::IcpConfig;
+use hitl_perception::tracker_bench::{run_with, TrackerBenchOptions};
 use hitl_sim_stub::camera::{DepthModel, NoiseModel, Preset, StereoDepth};
 
 fn main() {
@@ -39,5 +41,15 @@ fn main() {
         move |i: u64, d: &mut [f32], k: &hitl_hal::Intrinsics| noise.draw(i).apply_depth(d, k);
     let degrade: Option<hitl_perception::tracker_bench::DepthModel<'_>> =
         (depth == "orbbec").then_some(&orbbec);
-    println!("{}", run(&o, degrade));
+    let mut cfg = IcpConfig::default();
+    if let Some(n) = std::env::var("POLISH_POINTS").ok().and_then(|n| n.parse().ok()) {
+        cfg.polish_points = n;
+    }
+    if let Some(n) = std::env::var("PIXEL_ITERS").ok().and_then(|n| n.parse().ok()) {
+        cfg.pixel_iters = n;
+    }
+    if let Some(n) = std::env::var("TRACK_PIXEL_ITERS").ok().and_then(|n| n.parse().ok()) {
+        cfg.track_pixel_iters = n;
+    }
+    println!("{}", run_with(&o, degrade, &cfg));
 }

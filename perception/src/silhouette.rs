@@ -31,6 +31,9 @@ pub struct Drawn {
     pub silhouette_px: usize,
     /// Target pixels after the margin.
     pub mask_px: usize,
+    /// The drawn target's box before the margin, pixels (u0, v0, u1, v1 inclusive); none when
+    /// the target is out of view.
+    pub window: Option<[usize; 4]>,
 }
 
 /// Draws a target's silhouette, with fixed occluders, from any camera pose.
@@ -43,6 +46,9 @@ pub struct SilhouetteRenderer {
     /// Scratch: depth and owner per pixel; the margin's copy.
     depth: Vec<f32>,
     owner: Vec<u8>,
+    /// The face seen at each pixel, kept only when asked for ([`Self::with_faces`]).
+    face: Vec<u32>,
+    keep_faces: bool,
     grown: Vec<u8>,
     disc: Vec<(i32, i32)>,
     disc_radius: u32,
@@ -73,10 +79,25 @@ impl SilhouetteRenderer {
             faces,
             depth: Vec::new(),
             owner: Vec::new(),
+            face: Vec::new(),
+            keep_faces: false,
             grown: Vec::new(),
             disc: Vec::new(),
             disc_radius: 0,
         })
+    }
+
+    /// Keeps the face seen at each pixel ([`Self::face_at`]): a pose refined by drawing the
+    /// target needs each pixel's exact surface normal.
+    pub fn with_faces(mut self) -> Self {
+        self.keep_faces = true;
+        self
+    }
+
+    /// The target face (index into the mesh's faces) drawn at pixel `idx`, valid as
+    /// [`Self::surface_depth`] is; `None` unless kept ([`Self::with_faces`]).
+    pub fn face_at(&self, idx: usize) -> Option<usize> {
+        self.face.get(idx).map(|&f| f as usize)
     }
 
     /// Adds a fixed occluder (vertices in the target's frame): what it hides is not target.
@@ -113,6 +134,9 @@ impl SilhouetteRenderer {
             self.depth = vec![f32::INFINITY; n];
             self.owner = vec![0; n];
         }
+        if self.keep_faces && self.face.len() != n {
+            self.face = vec![0; n];
+        }
         let r = camera_t_target.rotation.to_rotation_matrix();
         let t = camera_t_target.translation.vector;
         // Only the target's box in the image is drawn, cleared and scanned: the rest is 0.
@@ -135,19 +159,21 @@ impl SilhouetteRenderer {
             self.depth[v * w + bx.u0..=v * w + bx.u1].fill(f32::INFINITY);
             self.owner[v * w + bx.u0..=v * w + bx.u1].fill(0);
         }
-        for &(f, is_target) in &self.faces {
+        for (id, &(f, is_target)) in self.faces.iter().enumerate() {
             let tri = f.map(|i| r * self.vertices[i as usize] + t);
             let mut poly = [Vector3::zeros(); 4];
             let m = clip_near(&tri, &mut poly);
+            let drawn = Drawing { is_target, id: id as u32 };
             // A convex polygon of 3 or 4 corners: a fan of triangles.
             for j in 1..m.saturating_sub(1) {
                 fill(
                     [poly[0], poly[j], poly[j + 1]],
                     k,
                     &bx,
-                    is_target,
+                    drawn,
                     &mut self.depth,
                     &mut self.owner,
+                    &mut self.face,
                 );
             }
         }
@@ -166,7 +192,7 @@ impl SilhouetteRenderer {
         if margin_px > 0 && silhouette_px > 0 {
             mask_px = self.grow(mask, w, h, &bx, margin_px);
         }
-        Drawn { silhouette_px, mask_px }
+        Drawn { silhouette_px, mask_px, window: Some([bx.u0, bx.v0, bx.u1, bx.v1]) }
     }
 
     /// The drawn surface's depth (metres along the camera axis) at pixel `idx`, valid after a
@@ -312,15 +338,23 @@ fn edge(a: (f64, f64), b: (f64, f64), c: (f64, f64)) -> f64 {
     (b.0 - a.0) * (c.1 - a.1) - (b.1 - a.1) * (c.0 - a.0)
 }
 
+/// What a filled triangle is: the target's or an occluder's, and its index.
+#[derive(Debug, Clone, Copy)]
+struct Drawing {
+    is_target: bool,
+    id: u32,
+}
+
 /// Fills one camera-frame triangle (in front of the near plane) with a depth test, inside the
-/// window `bx`.
+/// window `bx`, into the depth and owner buffers (and `face`, unless it is empty).
 fn fill(
     p: [Vector3<f64>; 3],
     k: &Intrinsics,
     bx: &Window,
-    is_target: bool,
+    drawn: Drawing,
     depth: &mut [f32],
     owner: &mut [u8],
+    face: &mut [u32],
 ) {
     let w = k.width as usize;
     let uv = p.map(|q| k.project(q.x, q.y, q.z));
@@ -342,7 +376,7 @@ fn fill(
     }
     let inv = 1.0 / area;
     let iz = p.map(|q| 1.0 / q.z);
-    let label = if is_target { 1 } else { 2 };
+    let label = if drawn.is_target { 1 } else { 2 };
     for v in v0..=v1 {
         let row = v * w;
         for u in u0..=u1 {
@@ -359,6 +393,9 @@ fn fill(
             if z < depth[i] {
                 depth[i] = z;
                 owner[i] = label;
+                if let Some(f) = face.get_mut(i) {
+                    *f = drawn.id;
+                }
             }
         }
     }

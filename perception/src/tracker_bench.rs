@@ -71,18 +71,20 @@ fn bench_target(
     spec: &str,
     o: &TrackerBenchOptions,
     degrade: Option<DepthModel<'_>>,
+    cfg: &IcpConfig,
 ) -> Result<serde_json::Value, String> {
     let model = TargetModel::from_spec(spec).map_err(|e| e.to_string())?;
     let scale = paper_scale(o.range_m);
     let near = scale * o.range_m;
     let mesh = model.lab_mesh(scale).map_err(|e| e.to_string())?;
-    let mut tracker = IcpTracker::new(&mesh, IcpConfig::default()).map_err(|e| e.to_string())?;
+    let mut tracker = IcpTracker::new(&mesh, cfg.clone()).map_err(|e| e.to_string())?;
     let mut drawer = match o.rendered_mask {
         Some(_) => Some(SilhouetteRenderer::new(&mesh).map_err(|e| e.to_string())?),
         None => None,
     };
     let n = o.frames.max(2);
     let (mut pairs, mut solve_s, mut reg_s) = (Vec::with_capacity(n), Vec::new(), Vec::new());
+    let mut track_s = Vec::new();
     let (mut registered, mut lost) = (0usize, 0usize);
     let mut mask = Vec::new();
     for i in 0..n {
@@ -117,7 +119,8 @@ fn bench_target(
                 lost += 1;
                 tracker.reset();
             }
-            _ => {}
+            EstimateKind::Tracked => track_s.push(dt),
+            EstimateKind::Direct => {}
         }
         solve_s.push(dt);
         pairs.push(PosePair { timestamp_ns: i as u64, gt, est: e.pose });
@@ -136,6 +139,10 @@ fn bench_target(
         obj.insert("lost_frames".into(), lost.into());
         obj.insert("frames_per_s".into(), (n as f64 / total.max(1e-9)).into());
         obj.insert("registration_s_mean".into(), crate::metrics::mean(&reg_s).into());
+        obj.insert("tracking_ms_mean".into(), (1e3 * crate::metrics::mean(&track_s)).into());
+        // The first frame's own error, before the metric calibrates every frame on it.
+        let first = pairs.first().and_then(|p| p.est.map(|e| e.rotation.angle_to(&p.gt.rotation)));
+        obj.insert("frame0_raw_er_deg".into(), first.map(f64::to_degrees).into());
         obj.insert("goal".into(), (if met { "met" } else { "missed" }).into());
         if std::env::var_os("HITL_BENCH_PER_FRAME").is_some() {
             let rows: Vec<_> = m
@@ -152,12 +159,21 @@ fn bench_target(
 /// The benchmark: every target's figures and how many met the goal. `degrade`: the depth
 /// model (none: depth as rendered).
 pub fn run(o: &TrackerBenchOptions, degrade: Option<DepthModel<'_>>) -> serde_json::Value {
+    run_with(o, degrade, &IcpConfig::default())
+}
+
+/// [`run`] with the tracker tuned as `cfg` says (tuning: `examples/tracker_bench.rs`).
+pub fn run_with(
+    o: &TrackerBenchOptions,
+    degrade: Option<DepthModel<'_>>,
+    cfg: &IcpConfig,
+) -> serde_json::Value {
     let t0 = Instant::now();
     let mut per_target = serde_json::Map::new();
     let mut met = 0usize;
     for spec in &o.targets {
-        let v =
-            bench_target(spec, o, degrade).unwrap_or_else(|e| serde_json::json!({ "error": e }));
+        let v = bench_target(spec, o, degrade, cfg)
+            .unwrap_or_else(|e| serde_json::json!({ "error": e }));
         met += usize::from(v["goal"] == "met");
         per_target.insert(spec.clone(), v);
     }

@@ -1,5 +1,6 @@
 //! Point-to-plane ICP: scene points (camera frame) against the model's surface samples, trimmed
-//! correspondences, Gauss-Newton steps in a frame centred on the scene centroid.
+//! correspondences, Gauss-Newton steps in a frame centred on the scene centroid ([`Steps`], which
+//! registration's pixel-wise refinement shares, [`super::compare`]).
 
 use super::cloud::centroid;
 use super::model::ModelCloud;
@@ -27,6 +28,94 @@ pub struct Fit {
 pub struct RotationPrior {
     pub rotation: UnitQuaternion<f64>,
     pub weight: f64,
+}
+
+/// The normal equations of one Gauss-Newton point-to-plane step about a centre `c` (the scene
+/// centroid): unknowns the rotation vector and the translation, each pair weighed by Tukey's
+/// biweight of its residual over the trimming bound (a point half-way to the bound counts half
+/// as much, so stray points (the stand, what lies behind the outline in a mask with a margin, a
+/// stereo camera's outliers) pull less than the noise-sized ones).
+pub struct Steps {
+    a: Matrix6<f64>,
+    b: Vector6<f64>,
+    c: Vector3<f64>,
+    used: usize,
+}
+
+impl Steps {
+    pub fn new(c: Vector3<f64>) -> Steps {
+        Steps { a: Matrix6::zeros(), b: Vector6::zeros(), c, used: 0 }
+    }
+
+    /// Adds a model point `m` with normal `n` (camera frame) against the scene point `s`,
+    /// weighed `weight` times the biweight; a residual at or past `bound` adds nothing.
+    pub fn add(
+        &mut self,
+        m: &Vector3<f64>,
+        n: &Vector3<f64>,
+        s: &Vector3<f64>,
+        bound: f64,
+        weight: f64,
+    ) {
+        let arm = m - self.c;
+        let r0 = n.dot(&(m - s));
+        let u = r0 / bound;
+        if u.abs() >= 1.0 {
+            return;
+        }
+        let j = Vector6::new(
+            arm.y * n.z - arm.z * n.y,
+            arm.z * n.x - arm.x * n.z,
+            arm.x * n.y - arm.y * n.x,
+            n.x,
+            n.y,
+            n.z,
+        );
+        let wt = (1.0 - u * u).powi(2) * weight;
+        self.a += j * j.transpose() * wt;
+        self.b += j * r0 * wt;
+        self.used += 1;
+    }
+
+    /// Levenberg-Marquardt damping: each unknown's own curvature raised by the factor
+    /// `1 + lambda`, so a direction the pairs pin only weakly takes a shorter step.
+    pub fn damp(&mut self, lambda: f64) {
+        for k in 0..6 {
+            self.a[(k, k)] *= 1.0 + lambda;
+        }
+    }
+
+    /// The step (rotation vector, then translation) from the pose `t`; `None` with fewer than six
+    /// pairs or a singular system.
+    pub fn solve(&mut self, prior: Option<&RotationPrior>, t: &Pose) -> Option<Vector6<f64>> {
+        if self.used < 6 {
+            return None;
+        }
+        let damping = 1e-9 * self.a.trace().max(1e-30);
+        for k in 0..6 {
+            self.a[(k, k)] += damping;
+        }
+        if let Some(p) = prior.filter(|p| p.weight > 0.0 && p.weight.is_finite()) {
+            // The step's rotation part is pulled toward the turn that reaches the prior.
+            let to_prior = (p.rotation * t.rotation.inverse()).scaled_axis();
+            for k in 0..3 {
+                self.a[(k, k)] += p.weight;
+                self.b[k] -= p.weight * to_prior[k];
+            }
+        }
+        self.a.cholesky().map(|ch| ch.solve(&(-self.b)))
+    }
+
+    /// `t` moved by the step `x` about the centre.
+    pub fn apply(&self, t: &Pose, x: &Vector6<f64>) -> Pose {
+        let w = Vector3::new(x[0], x[1], x[2]);
+        let v = Vector3::new(x[3], x[4], x[5]);
+        let step = Pose::new(v, w);
+        let mut out = Translation3::from(self.c) * step * Translation3::from(-self.c) * t;
+        // Re-normalise against accumulated rounding.
+        out.rotation = UnitQuaternion::new_normalize(out.rotation.into_inner());
+        out
+    }
 }
 
 /// Refines `init` with up to `iters` point-to-plane steps. `max_dist` bounds correspondences at
@@ -69,64 +158,22 @@ pub fn align(
         sorted.sort_by(|a, b| a.total_cmp(b));
         let med = sorted.get(sorted.len() / 2).copied().unwrap_or(0.0);
         bound = bound.min((3.0 * med).max(tol));
-        let mut a = Matrix6::<f64>::zeros();
-        let mut b = Vector6::<f64>::zeros();
-        let mut used = 0usize;
+        let mut eq = Steps::new(c);
         for (s, i, d) in &pairs {
             if *d > bound {
                 continue;
             }
             let m = r * model.points[*i] + tr;
             let n = r * model.normals[*i];
-            let arm = m - c;
-            let r0 = n.dot(&(m - s));
-            let j = Vector6::new(
-                arm.y * n.z - arm.z * n.y,
-                arm.z * n.x - arm.x * n.z,
-                arm.x * n.y - arm.y * n.x,
-                n.x,
-                n.y,
-                n.z,
-            );
-            // Tukey's biweight on the point-to-plane residual, zero beyond the trimming bound:
-            // a point half-way to the bound counts half as much, so stray points (the stand,
-            // what lies behind the outline in a mask with a margin, a stereo camera's outliers)
-            // pull less than the noise-sized ones.
-            let u = r0 / bound;
-            if u.abs() >= 1.0 {
-                continue;
-            }
-            let wt = (1.0 - u * u).powi(2);
-            a += j * j.transpose() * wt;
-            b += j * r0 * wt;
-            used += 1;
+            eq.add(&m, &n, s, bound, 1.0);
         }
-        if used < 6 {
-            break;
-        }
-        let damping = 1e-9 * a.trace().max(1e-30);
-        for k in 0..6 {
-            a[(k, k)] += damping;
-        }
-        if let Some(p) = prior.filter(|p| p.weight > 0.0 && p.weight.is_finite()) {
-            // The step's rotation part is pulled toward the turn that reaches the prior.
-            let to_prior = (p.rotation * t.rotation.inverse()).scaled_axis();
-            for k in 0..3 {
-                a[(k, k)] += p.weight;
-                b[k] -= p.weight * to_prior[k];
-            }
-        }
-        let Some(x) = a.cholesky().map(|ch| ch.solve(&(-b))) else {
+        let Some(x) = eq.solve(prior, &t) else {
             break;
         };
-        let w = Vector3::new(x[0], x[1], x[2]);
-        let v = Vector3::new(x[3], x[4], x[5]);
-        // The step about the scene centroid: rotation vector `w`, then translation `v`.
-        let step = Pose::new(v, w);
-        t = Translation3::from(c) * step * Translation3::from(-c) * t;
-        // Re-normalise against accumulated rounding.
-        t.rotation = UnitQuaternion::new_normalize(t.rotation.into_inner());
-        if w.norm() < 1e-9 && v.norm() < 1e-9 * model.diameter {
+        // The step about the scene centroid: rotation vector, then translation.
+        t = eq.apply(&t, &x);
+        if x.fixed_rows::<3>(0).norm() < 1e-9 && x.fixed_rows::<3>(3).norm() < 1e-9 * model.diameter
+        {
             break;
         }
     }
