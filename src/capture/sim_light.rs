@@ -8,7 +8,7 @@ use hitl_trajectories::lab::LabConfig;
 use hitl_trajectories::planner::mapping;
 use hitl_trajectories::timing::SetpointTable;
 use hitl_trajectories::Trajectory;
-use nalgebra::{Matrix3, Vector3};
+use nalgebra::Vector3;
 
 /// Sets the simulated Sun's level (lock-free).
 #[derive(Debug, Clone)]
