@@ -2,7 +2,8 @@
 # The README's real-path SITL rows (issue 23): the 10 m fly-around of the SITL table (20 s, a
 # capture every 0.5 s, 41 frames) with the Orbbec preset at 1280x800, the controller's drawn masks
 # (--mask rendered) and the Orbbec stereo depth model (--depth-model orbbec), ICP on the
-# ground-truth mesh, lab scene; each run scored by `hitl eval`. Prints one Markdown table.
+# ground-truth mesh, lab scene, on the simulated clock (every capture rendered and estimated, the
+# same figures on any machine); each run scored by `hitl eval`. Prints one Markdown table.
 #   usage: scripts/sitl_real_path.sh [TARGET...]   (default: asymmetric one-plane two-planes)
 #   HITL=path picks the binary (default ./target/release/hitl); RANGE=M the range (default 10).
 set -euo pipefail
@@ -20,7 +21,7 @@ echo "| --- | --- | --- | --- | --- | --- | --- | --- | --- |"
 for t in "${TARGETS[@]}"; do
   rec="$OUT/$t.mcap"
   $HITL run "$plan" --record "$rec" --camera sim --camera-preset orbbec --camera-size 1280x800 \
-    --light sim --perception icp --mask rendered --depth-model orbbec --target-model "$t" \
+    --light sim --perception icp --mask rendered --depth-model orbbec --target-model "$t" --clock sim \
     --plain >"$OUT/$t.log" 2>&1 || [ $? -eq 4 ]
   $HITL eval "$rec" --json >"$OUT/$t.json"
   python3 - "$OUT/$t.json" "$RANGE" "$t" <<'PY'
