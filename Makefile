@@ -32,6 +32,8 @@ test-rust:
 lint:
 	$(CARGO) fmt --all -- --check
 	$(CARGO) clippy --workspace --all-targets -- -D warnings
+	# The controller without the stub (real hardware only) must build clean too.
+	$(CARGO) clippy -p hitl --no-default-features -- -D warnings
 
 # Opt-in: a full LeRobotDataset round trip of `hitl export lerobot` (docs/lerobot-export.md).
 # LeRobot >= 0.6 (depth maps) needs Python >= 3.12: PYTHON312 names one. A run an interlock
