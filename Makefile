@@ -29,10 +29,11 @@ test-rust:
 	$(CARGO) test --release --workspace --all-targets --no-fail-fast
 	$(CARGO) test --release --workspace --doc
 
+# lint: rustfmt, clippy on everything, and clippy on the controller without the stub (a
+# real-hardware-only build must build clean too).
 lint:
 	$(CARGO) fmt --all -- --check
 	$(CARGO) clippy --workspace --all-targets -- -D warnings
-	# The controller without the stub (real hardware only) must build clean too.
 	$(CARGO) clippy -p hitl --no-default-features -- -D warnings
 
 # Opt-in: a full LeRobotDataset round trip of `hitl export lerobot` (docs/lerobot-export.md).
