@@ -141,17 +141,23 @@ fn perception_name(spec: &BackendSpec) -> String {
 /// After the loop: frames for the last captures may still be on their way; hand them to the
 /// intake while they keep coming (until 2 s pass without one), so every capture is recorded or
 /// reported. A camera that buffers a backlog (the simulated one's renderer behind a loaded
-/// machine: docs/sim-camera.md) delivers it all, however long it is.
+/// machine: docs/sim-camera.md) delivers it all. It ends once every fired capture has a frame,
+/// and after [`LATE_FRAMES_MAX`] at most, so a camera that keeps streaming (left free-running)
+/// cannot hold the run open.
 pub(super) fn collect_late_frames(camera: &mut RunCamera, intake: &IntakeQueues, fired: u64) {
     let quiet = Duration::from_secs(2);
-    let mut deadline = Instant::now() + quiet;
-    while Instant::now() < deadline {
+    let started = Instant::now();
+    let mut deadline = started + quiet;
+    while Instant::now() < deadline && started.elapsed() < LATE_FRAMES_MAX {
         match camera.poll_frame() {
             Ok(Some(frame)) => {
                 deadline = Instant::now() + quiet;
-                intake.frames_in.fetch_add(1, Ordering::Relaxed);
+                let delivered = intake.frames_in.fetch_add(1, Ordering::Relaxed) + 1;
                 if intake.frames.push(frame).is_err() {
                     intake.frames_lost.fetch_add(1, Ordering::Relaxed);
+                }
+                if delivered >= fired {
+                    break;
                 }
             }
             Ok(None) => {
@@ -165,3 +171,7 @@ pub(super) fn collect_late_frames(camera: &mut RunCamera, intake: &IntakeQueues,
         }
     }
 }
+
+/// The longest the session waits for late frames after the loop: the simulated camera's whole
+/// exposure queue (64) rendered at a loaded machine's pace fits well inside it.
+const LATE_FRAMES_MAX: Duration = Duration::from_secs(60);
