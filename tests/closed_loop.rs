@@ -16,7 +16,7 @@
 
 mod common;
 
-use common::{hitl, SHARED_VM_LAB, SIM_CAPTURE_RUN};
+use common::{hitl, text, SHARED_VM_LAB, SIM_CAPTURE_RUN, STUB_5MM_OFF};
 use hitl_record::reader::{read_recording, Recording};
 use hitl_record::Phase;
 use hitl_trajectories::kinematics::camera_pose;
@@ -28,13 +28,6 @@ use std::sync::Mutex;
 
 /// Runs of the embedded stub, one at a time (each renders and estimates on the CI's 2 cores).
 static ONE_AT_A_TIME: Mutex<()> = Mutex::new(());
-
-const STUB_5MM_OFF: &str =
-    concat!(env!("CARGO_MANIFEST_DIR"), "/tests/data/target-5mm-off-lab.toml");
-
-fn text(out: &Output) -> String {
-    format!("{}{}", String::from_utf8_lossy(&out.stdout), String::from_utf8_lossy(&out.stderr))
-}
 
 fn plan(dir: &Path, preset: &str, range_m: &str, duration_s: &str) -> PathBuf {
     let out = dir.join(format!("{preset}-{range_m}.npz"));

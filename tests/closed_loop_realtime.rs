@@ -17,23 +17,15 @@
 
 mod common;
 
-use common::{hitl, SHARED_VM_LAB, SIM_CAPTURE_RUN};
+use common::{hitl, text, SHARED_VM_LAB, SIM_CAPTURE_RUN, STUB_5MM_OFF};
 use hitl_record::reader::{read_recording, Recording};
-use hitl_trajectories::kinematics::camera_pose;
+use hitl_trajectories::kinematics::{camera_pose, Joints};
 use hitl_trajectories::lab::LabConfig;
 use nalgebra::Vector3;
 use std::path::Path;
-use std::process::Output;
-
-const STUB_5MM_OFF: &str =
-    concat!(env!("CARGO_MANIFEST_DIR"), "/tests/data/target-5mm-off-lab.toml");
 
 /// The closed loop's default corridor (`--corridor-m`), metres.
 const DEFAULT_CORRIDOR_M: f64 = 0.006;
-
-fn text(out: &Output) -> String {
-    format!("{}{}", String::from_utf8_lossy(&out.stdout), String::from_utf8_lossy(&out.stderr))
-}
 
 /// The number just before ` {what}` in the run's summary (e.g. `1687 approach,`).
 fn count(summary: &str, what: &str) -> u64 {
@@ -50,7 +42,7 @@ fn after(summary: &str, what: &str) -> u64 {
 }
 
 /// The measured joints at loop tick `tick` (the last report at or before its setpoint).
-fn measured_at(rec: &Recording, tick: u64) -> [f64; 7] {
+fn measured_at(rec: &Recording, tick: u64) -> Joints {
     let t = rec.setpoints.iter().find(|s| s.tick == tick).expect("setpoint").t_ns;
     rec.states.iter().take_while(|s| s.t_ns <= t).last().expect("a report").q
 }
@@ -131,7 +123,7 @@ fn station_keeping_closed_loop_on_the_hosts_clock_holds_its_relative_position() 
     let believed = LabConfig::load(Path::new(SHARED_VM_LAB)).expect("lab");
     let truth = LabConfig::load(Path::new(STUB_5MM_OFF)).expect("stub lab");
     let mount = believed.camera_mount();
-    let cam = |q: &[f64; 7]| camera_pose(q, &mount).translation.vector;
+    let cam = |q: &Joints| camera_pose(q, &mount).translation.vector;
     let plan = hitl_trajectories::npz::load(&traj).expect("plan").trajectory;
     let planned =
         cam(plan.qpos.last().expect("waypoints")) - believed.target_position_base().coords;

@@ -4,7 +4,10 @@
 //! replay_icp -- RUN.mcap [TARGET]`. The figures come up to the target's declared symmetry too;
 //! `POLISH_POINTS=N` and `PIXEL_ITERS=N` set registration's last stage (0 points: off).
 
-use hitl_perception::icp::{IcpConfig, IcpTracker};
+#[path = "common/icp_env.rs"]
+mod icp_env;
+
+use hitl_perception::icp::IcpTracker;
 use hitl_perception::metrics::{evaluate_symmetric, PosePair};
 use hitl_perception::{PoseEstimator, TargetModel};
 use std::collections::BTreeMap;
@@ -19,16 +22,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     let target = args.next().or_else(|| run.get("target_model").cloned()).unwrap_or_default();
     let model = TargetModel::from_spec(&target)?;
     let mesh = model.lab_mesh(scale)?;
-    let mut cfg = IcpConfig::default();
-    if let Some(n) = std::env::var("POLISH_POINTS").ok().and_then(|n| n.parse().ok()) {
-        cfg.polish_points = n;
-    }
-    if let Some(n) = std::env::var("PIXEL_ITERS").ok().and_then(|n| n.parse().ok()) {
-        cfg.pixel_iters = n;
-    }
-    if let Some(n) = std::env::var("TRACK_PIXEL_ITERS").ok().and_then(|n| n.parse().ok()) {
-        cfg.track_pixel_iters = n;
-    }
+    let cfg = icp_env::icp_config_from_env();
     let mut tracker = IcpTracker::new(&mesh, cfg)?;
     let gt: BTreeMap<u64, _> = rec.pose_gt.iter().map(|p| (p.capture_ns, p.pose)).collect();
     let mut est = BTreeMap::new();

@@ -3,7 +3,9 @@
 //! [ideal|orbbec] [sim|rendered] FRAMES TARGET...` at the Orbbec preset's 1280x800.
 //! `POLISH_POINTS=N` and `PIXEL_ITERS=N` set registration's last stage (0 points: off, the tracker before it).
 
-use hitl_perception::icp::IcpConfig;
+#[path = "common/icp_env.rs"]
+mod icp_env;
+
 use hitl_perception::tracker_bench::{run_with, TrackerBenchOptions};
 use hitl_sim_stub::camera::{DepthModel, NoiseModel, Preset, StereoDepth};
 
@@ -41,15 +43,6 @@ fn main() {
         move |i: u64, d: &mut [f32], k: &hitl_hal::Intrinsics| noise.draw(i).apply_depth(d, k);
     let degrade: Option<hitl_perception::tracker_bench::DepthModel<'_>> =
         (depth == "orbbec").then_some(&orbbec);
-    let mut cfg = IcpConfig::default();
-    if let Some(n) = std::env::var("POLISH_POINTS").ok().and_then(|n| n.parse().ok()) {
-        cfg.polish_points = n;
-    }
-    if let Some(n) = std::env::var("PIXEL_ITERS").ok().and_then(|n| n.parse().ok()) {
-        cfg.pixel_iters = n;
-    }
-    if let Some(n) = std::env::var("TRACK_PIXEL_ITERS").ok().and_then(|n| n.parse().ok()) {
-        cfg.track_pixel_iters = n;
-    }
+    let cfg = icp_env::icp_config_from_env();
     println!("{}", run_with(&o, degrade, &cfg));
 }

@@ -4,6 +4,16 @@
 use std::path::Path;
 use std::process::{Command, Output, Stdio};
 
+/// What a finished `hitl` printed, stdout then stderr (for assertion messages and summaries).
+pub fn text(out: &Output) -> String {
+    format!("{}{}", String::from_utf8_lossy(&out.stdout), String::from_utf8_lossy(&out.stderr))
+}
+
+/// The stub's lab for the closed-loop tests: the target 5 mm (lab) from where the shared-VM lab
+/// puts it (`--stub-config`), so the controller's belief and the truth differ.
+pub const STUB_5MM_OFF: &str =
+    concat!(env!("CARGO_MANIFEST_DIR"), "/tests/data/target-5mm-off-lab.toml");
+
 /// Runs `hitl ARGS...` with no stdin and returns what it printed and its exit status.
 pub fn hitl(args: &[&str]) -> Output {
     Command::new(env!("CARGO_BIN_EXE_hitl"))

@@ -217,6 +217,21 @@ impl Scored {
     }
 }
 
+/// `HITL_ICP_DEBUG`'s line for a candidate: its score and the four terms it is the product of.
+impl std::fmt::Display for Scored {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        write!(
+            f,
+            "score {:.3} (inliers {:.3} silhouette {:.3} violation {:.3} agreement {:.3})",
+            self.score(),
+            self.fit.inlier_frac,
+            self.silhouette,
+            self.violation,
+            self.agreement
+        )
+    }
+}
+
 impl IcpTracker {
     /// A tracker for `mesh` given at the scale the camera sees it (lab metres).
     pub fn new(mesh: &Mesh, cfg: IcpConfig) -> Result<IcpTracker, PerceptionError> {
@@ -366,15 +381,8 @@ impl IcpTracker {
         };
         if debug() {
             for c in &checked {
-                debug_line!(
-                    "icp checked: score {:.3} (inliers {:.3} silhouette {:.3} violation {:.3} agreement {:.3}) {:.1} deg from prior",
-                    c.score(),
-                    c.fit.inlier_frac,
-                    c.silhouette,
-                    c.violation,
-                    c.agreement,
-                    rotation_distance(&c.fit.pose, p).to_degrees()
-                );
+                let from_prior = rotation_distance(&c.fit.pose, p).to_degrees();
+                debug_line!("icp checked: {c} {from_prior:.1} deg from prior");
             }
         }
         // Keep the track's branch: of the hypotheses as good as the best, the nearest to it.
@@ -478,15 +486,8 @@ impl IcpTracker {
                 t0.elapsed()
             );
             for (c, p) in out.iter().zip(&picked) {
-                debug_line!(
-                    "icp polished: score {:.3} (inliers {:.3} silhouette {:.3} violation {:.3} agreement {:.3}), moved {:.2} deg",
-                    c.score(),
-                    c.fit.inlier_frac,
-                    c.silhouette,
-                    c.violation,
-                    c.agreement,
-                    rotation_distance(&c.fit.pose, p).to_degrees()
-                );
+                let moved = rotation_distance(&c.fit.pose, p).to_degrees();
+                debug_line!("icp polished: {c}, moved {moved:.2} deg");
             }
         }
         out
