@@ -1,7 +1,7 @@
 //! The calibration board: an AprilGrid (a grid of tag36h11 AprilTags) and its printable drawing.
 //!
-//! The tags' bit patterns come from the detection library's own family table
-//! (`kornia_apriltag::family::TagFamily::tag36_h11`: `code_data`, `bit_x`, `bit_y`), drawn the
+//! The tags' bit patterns come from the detection library's own family table (the AprilTag C
+//! library's tag36h11: `codes`, `bit_x`, `bit_y`, read in [`crate::family`]), drawn the
 //! way the AprilTag reference implementation draws a tag (`apriltag_to_image`): a black square
 //! of `width_at_border` (8) cells with a white ring of one cell around it; code bit `nbits-1-i`
 //! set makes cell (`bit_x[i]`, `bit_y[i]`) of the black square white. So what is printed is
@@ -11,7 +11,6 @@
 //! of the first tag's black square, x to the right along a row, y down a column, z into the board.
 
 use hitl_trajectories::lab::BoardPlacement;
-use kornia_apriltag::family::TagFamily;
 use nalgebra::Point3;
 use std::fmt::Write as _;
 
@@ -70,15 +69,15 @@ impl Board {
         if p.position_target_m.iter().chain(&p.rpy_deg).any(|v| !v.is_finite()) {
             return bad("position_target_m and rpy_deg must be finite".into());
         }
-        let family = TagFamily::tag36_h11().map_err(|e| BoardError::Invalid(e.to_string()))?;
+        let family = crate::family::tag36h11();
         let n = (p.rows * p.cols) as usize;
         let last = p.first_id as usize + n;
-        if last > family.code_data.len() {
+        if last > family.codes.len() {
             return bad(format!(
                 "tags {}..{} do not exist: tag36h11 has {} codes",
                 p.first_id,
                 last - 1,
-                family.code_data.len()
+                family.codes.len()
             ));
         }
         if family.width_at_border != TAG_CELLS {
@@ -86,7 +85,7 @@ impl Board {
         }
         let patterns = (0..n)
             .map(|k| {
-                let code = family.code_data[p.first_id as usize + k] as u64;
+                let code = family.codes[p.first_id as usize + k];
                 let mut cells = [[true; TAG_CELLS]; TAG_CELLS];
                 for i in 0..family.nbits {
                     if code & (1u64 << (family.nbits - i - 1)) != 0 {

@@ -1,10 +1,11 @@
 //! Calibration of the testbed (`hitl calibrate`): the AprilGrid board and its drawing
-//! ([`board`]), its detection through kornia-apriltag ([`detect`]), the robot-world-hand-eye
+//! ([`board`]), its detection through the AprilTag C library ([`detect`], [`family`]), the robot-world-hand-eye
 //! solver with its refinement and uncertainties ([`solve`]), and the views the arm takes of the
 //! board ([`views`]).
 
 pub mod board;
 pub mod detect;
+pub mod family;
 pub mod solve;
 pub mod views;
 

@@ -1,5 +1,5 @@
 //! The solver on synthetic views (exact and noisy corners), its refusals, the board drawing and
-//! detection of a drawn board through kornia-apriltag.
+//! detection of a drawn board through the AprilTag C library.
 
 use hitl_calib::board::Board;
 use hitl_calib::solve::{self, Acceptance, SolveError, View};
@@ -215,7 +215,7 @@ fn the_drawing_is_true_to_scale() {
 }
 
 #[test]
-fn kornia_finds_every_tag_of_a_drawn_board_at_its_corners() {
+fn apriltag_finds_every_tag_of_a_drawn_board_at_its_corners() {
     let board = Board::new(&BoardPlacement::default()).expect("board");
     let ppm = 1600.0; // 6 px per cell
     let border = 40;

@@ -1,5 +1,5 @@
 //! The calibration board in the stub's scene: it costs the physics little, and MuJoCo's renderer
-//! draws it so that kornia-apriltag decodes every tag at the corners the board's pose predicts.
+//! draws it so that the AprilTag C library decodes every tag at the corners the board's pose predicts.
 
 use hitl_calib::board::Board;
 use hitl_calib::views::{self, ViewPlan};

@@ -3,7 +3,7 @@
 //! Plans views of the calibration board on the target's mount (hitl_calib::views), plays them
 //! as one trajectory through `hitl run`'s session (the same preflight, interlocks, approach and
 //! confirmation for a real arm), recording the captures to a temporary MCAP file; detects the
-//! board in each colour frame (kornia-apriltag), solves the robot-world-hand-eye problem with the
+//! board in each colour frame (the AprilTag C library), solves the robot-world-hand-eye problem with the
 //! flange poses the recording holds (forward kinematics of the joints at exposure) and writes the
 //! lab configuration with the recovered camera mount and target pose and a `[calibration]`
 //! provenance block, atomically (a temporary file renamed into place: a refusal leaves nothing).
@@ -295,7 +295,7 @@ fn calibrated_lab(
     calibrated.target.rpy_deg = rpy;
     calibrated.calibration = Some(CalibrationProvenance {
         date: utc_now(),
-        method: "hitl calibrate: kornia-apriltag corners, per-view homography pose, Shah's \
+        method: "hitl calibrate: AprilTag (C library) corners, per-view homography pose, Shah's \
                  robot-world-hand-eye closed form, joint Levenberg-Marquardt on reprojection error"
             .into(),
         board: found.board.describe(),
