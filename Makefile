@@ -18,7 +18,9 @@ setup:
 build: setup
 	$(CARGO) build --release
 
-demo: setup
+# The demo needs the shared libraries but none of the Python test peers (`make test` installs them).
+demo:
+	@bash scripts/setup.sh --no-peers
 	$(CARGO) build --release
 	@bash scripts/demo.sh
 

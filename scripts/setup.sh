@@ -6,7 +6,10 @@
 #                libOrbbecSDK.so (Orbbec SDK 2.9.3, loaded at run time by the Orbbec driver),
 #                unpacked from their PyPI wheels; cargo and the binaries find them without exports
 #   .venv/       Python test peers: numpy, mcap, mcap-protobuf-support, xarm-python-sdk, onnx
-#   Debian       pkg-config and libudev-dev (serial port enumeration), rt-tests (cyclictest,
+#                (skipped with --no-peers: `make demo` needs none of them)
+#   Debian       pkg-config and libudev-dev (serial port enumeration), libzstd-dev (the MCAP
+#                recordings' zstd, linked from Debian's static library instead of compiling the
+#                copy zstd-sys carries: ZSTD_SYS_USE_PKG_CONFIG in .cargo/config.toml), rt-tests (cyclictest,
 #                the machine's own wake-up floor that `hitl bench loop` compares with), and
 #                libegl1, libegl-mesa0, libgl1-mesa-dri (the simulated camera renders with
 #                MuJoCo's OpenGL renderer on an offscreen EGL device: a GPU's, or Mesa's software
@@ -16,6 +19,12 @@
 #                trigger box's firmware and box-sim, docs/trigger-box.md), when missing and we
 #                are root
 set -euo pipefail
+PEERS=1
+case "${1:-}" in
+  --no-peers) PEERS=0 ;;
+  "") ;;
+  *) echo "usage: scripts/setup.sh [--no-peers]" >&2; exit 2 ;;
+esac
 cd "$(dirname "$0")/.."
 ROOT=$(pwd)
 MUJOCO_VERSION=3.17.0
@@ -30,7 +39,7 @@ say() { printf 'setup: %s\n' "$*"; }
 
 # --- Debian packages the build needs -------------------------------------------------------
 need_pkgs=()
-for p in pkg-config libudev-dev rt-tests libegl1 libegl-mesa0 libgl1-mesa-dri ffmpeg \
+for p in pkg-config libudev-dev libzstd-dev rt-tests libegl1 libegl-mesa0 libgl1-mesa-dri ffmpeg \
          gcc-avr avr-libc binutils-avr simavr libsimavr-dev libsimavrparts1; do
   dpkg-query -W -f='${Status}' "$p" 2>/dev/null | grep -q 'install ok installed' || need_pkgs+=("$p")
 done
@@ -45,34 +54,44 @@ if [ ${#need_pkgs[@]} -gt 0 ]; then
 fi
 
 # --- Shared libraries from PyPI wheels ------------------------------------------------------
-fetch_lib() { # name==version, member inside the wheel, file name to write
-  local spec=$1 member=$2 out=$3
-  if [ -f "$LIB/$out" ]; then return 0; fi
-  say "fetching $spec wheel for $out"
+fetch_lib() { # name==version, then pairs: member inside the wheel, file name to write
+  local spec=$1; shift
+  local missing=0 i
+  for ((i = 2; i <= $#; i += 2)); do [ -f "$LIB/${!i}" ] || missing=1; done
+  if [ $missing = 0 ]; then return 0; fi
+  say "fetching the $spec wheel"
   rm -rf "$DEPS/wheels/tmp" && mkdir -p "$DEPS/wheels/tmp"
   python3 -m pip download --quiet --no-deps --only-binary=:all: "$spec" -d "$DEPS/wheels/tmp"
-  python3 - "$DEPS/wheels/tmp" "$member" "$LIB/$out" <<'PY'
-import sys, zipfile, glob, shutil
-folder, member, out = sys.argv[1:]
+  python3 - "$DEPS/wheels/tmp" "$LIB" "$@" <<'PY'
+import sys, zipfile, glob, shutil, os
+folder, lib, *pairs = sys.argv[1:]
 wheel = glob.glob(folder + "/*.whl")[0]
-with zipfile.ZipFile(wheel) as z, z.open(member) as src, open(out + ".part", "wb") as dst:
-    shutil.copyfileobj(src, dst)
-shutil.move(out + ".part", out)
+with zipfile.ZipFile(wheel) as z:
+    for member, out in zip(pairs[::2], pairs[1::2]):
+        out = os.path.join(lib, out)
+        os.makedirs(os.path.dirname(out), exist_ok=True)
+        with z.open(member) as src, open(out + ".part", "wb") as dst:
+            shutil.copyfileobj(src, dst)
+        shutil.move(out + ".part", out)
 PY
   rm -rf "$DEPS/wheels/tmp"
 }
 fetch_lib "mujoco==$MUJOCO_VERSION" "mujoco/libmujoco.so.$MUJOCO_VERSION" "libmujoco.so.$MUJOCO_VERSION"
 fetch_lib "onnxruntime==$ORT_VERSION" "onnxruntime/capi/libonnxruntime.so.$ORT_VERSION" "libonnxruntime.so.$ORT_VERSION"
-fetch_lib "pyorbbecsdk2==$ORBBEC_WHEEL_VERSION" "pyorbbecsdk/libOrbbecSDK.so.$ORBBEC_SDK_VERSION" "libOrbbecSDK.so.$ORBBEC_SDK_VERSION"
 # The SDK's Gemini 305 support uses its frame-processor extension (extensions/ beside the library).
-mkdir -p "$LIB/extensions/frameprocessor"
-fetch_lib "pyorbbecsdk2==$ORBBEC_WHEEL_VERSION" "pyorbbecsdk/extensions/frameprocessor/libob_frame_processor.so" "extensions/frameprocessor/libob_frame_processor.so"
+fetch_lib "pyorbbecsdk2==$ORBBEC_WHEEL_VERSION" \
+  "pyorbbecsdk/libOrbbecSDK.so.$ORBBEC_SDK_VERSION" "libOrbbecSDK.so.$ORBBEC_SDK_VERSION" \
+  "pyorbbecsdk/extensions/frameprocessor/libob_frame_processor.so" "extensions/frameprocessor/libob_frame_processor.so"
 ln -sf "libmujoco.so.$MUJOCO_VERSION" "$LIB/libmujoco.so"
 ln -sf "libonnxruntime.so.$ORT_VERSION" "$LIB/libonnxruntime.so"
 ln -sf "libOrbbecSDK.so.$ORBBEC_SDK_VERSION" "$LIB/libOrbbecSDK.so"
 ln -sf "libOrbbecSDK.so.$ORBBEC_SDK_VERSION" "$LIB/libOrbbecSDK.so.2"
 
 # --- Python venv with the test peers --------------------------------------------------------
+if [ $PEERS = 0 ]; then
+  say "ready (.deps/lib; the Python test peers are left to 'make test')"
+  exit 0
+fi
 VENV="$ROOT/.venv"
 STAMP="$VENV/.hitl-peers"
 WANT=$(sha256sum "$ROOT/scripts/requirements-test.txt" | cut -d' ' -f1)
