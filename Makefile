@@ -18,27 +18,40 @@ setup:
 build: setup
 	$(CARGO) build --release
 
-# The demo needs the shared libraries but none of the Python test peers (`make test` installs them).
+# The demo builds what it runs (the stub; not the exporter, the mono and ONNX backends: Cargo.toml's
+# features) and needs the shared libraries but none of the Python test peers; `make build`,
+# `make test` and `make bench` build everything.
 demo:
 	@bash scripts/setup.sh --no-peers
-	$(CARGO) build --release
+	$(CARGO) build --release --no-default-features --features stub
 	@bash scripts/demo.sh
 
 # The trigger box's firmware and box-sim first: tests/trigger_box_sim.rs runs `hitl` against them.
 test: setup firmware test-rust lint
 
+# With cargo-nextest installed the test binaries run side by side (.config/nextest.toml keeps
+# apart what must not share the machine); without it, cargo test runs them one after another.
 test-rust:
-	$(CARGO) test --release --workspace --all-targets --no-fail-fast
+	@if $(CARGO) nextest --version >/dev/null 2>&1; then \
+	  echo "$(CARGO) nextest run --release --workspace --all-targets --no-fail-fast"; \
+	  $(CARGO) nextest run --release --workspace --all-targets --no-fail-fast; \
+	else \
+	  echo "$(CARGO) test --release --workspace --all-targets --no-fail-fast (no cargo-nextest)"; \
+	  $(CARGO) test --release --workspace --all-targets --no-fail-fast; \
+	fi
 	$(CARGO) test --release --workspace --doc
 
-# lint: rustfmt, clippy on everything, and clippy on the controller without the stub (a
-# real-hardware-only build must build clean too). Clippy with --release reuses `make demo`'s
-# build scripts and proc macros (ruckig's C++, zstd, bindings): in the dev profile it built them
-# all again, 6 min 48 s from an empty target/debug against 3 min here.
+# lint: rustfmt, clippy on everything, and clippy on the controller without its optional features
+# (no stub, exporter, mono or ONNX backend: a real-hardware-only build must build clean too). Clippy with --release reuses `make demo`'s
+# build scripts and proc macros (ruckig's C++, bindings): in the dev profile it built them all
+# again, 6 min 48 s from an empty target/debug against 3 min here. The stub-less pass selects the
+# whole workspace so that dependencies keep the features the first pass checked them with: only
+# hitl and hitl-perception are checked again (`-p hitl` alone re-checked a third of the tree,
+# 58 s); the price is that a dependency feature only the stub asks for would not be noticed missing.
 lint:
 	$(CARGO) fmt --all -- --check
 	$(CARGO) clippy --release --workspace --all-targets -- -D warnings
-	$(CARGO) clippy --release -p hitl --no-default-features -- -D warnings
+	$(CARGO) clippy --release --workspace --lib --bins --no-default-features -- -D warnings
 
 # Opt-in: a full LeRobotDataset round trip of `hitl export lerobot` (docs/lerobot-export.md).
 # LeRobot >= 0.6 (depth maps) needs Python >= 3.12: PYTHON312 names one. A run an interlock

@@ -20,8 +20,10 @@ $HITL check "$OUT/flyaround-10m.npz"
 
 echo
 echo "== hitl run on the embedded MuJoCo stub (orbit scene, Orbbec camera at 1280x800), recording to $OUT/run.mcap"
+# --no-retreat: the simulated arm stays where the orbit ends; its 16 s retreat to the rest pose
+# would show nothing the approach does not (a run retreats by default; `hitl park` also returns).
 $HITL run "$OUT/flyaround-10m.npz" --record "$OUT/run.mcap" --camera sim --camera-preset orbbec --camera-size 1280x800 \
-  --scene-kind orbit --light sim --perception icp --plain
+  --scene-kind orbit --light sim --perception icp --plain --no-retreat
 
 echo
 echo "== hitl report"

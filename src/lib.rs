@@ -16,6 +16,7 @@ pub mod console;
 pub mod control;
 pub mod devices;
 pub mod exit;
+#[cfg(feature = "export")]
 pub mod export;
 pub mod rt;
 pub mod session;

@@ -50,11 +50,21 @@ pub fn backend_from_spec(
     Ok(match spec {
         BackendSpec::None => None,
         BackendSpec::Icp => Some(Box::new(IcpTracker::new(mesh, IcpConfig::default())?)),
+        #[cfg(feature = "mono")]
         BackendSpec::Mono => {
             Some(Box::new(crate::mono::MonoTracker::new(mesh, crate::mono::MonoConfig::default())?))
         }
+        #[cfg(feature = "onnx")]
         BackendSpec::Onnx(path) => {
             Some(Box::new(crate::onnx::OnnxEstimator::load(path, Some(mesh))?))
+        }
+        #[cfg(not(feature = "mono"))]
+        BackendSpec::Mono => {
+            return Err(PerceptionError::NotBuilt { backend: "mono", feature: "mono" })
+        }
+        #[cfg(not(feature = "onnx"))]
+        BackendSpec::Onnx(_) => {
+            return Err(PerceptionError::NotBuilt { backend: "onnx", feature: "onnx" })
         }
         BackendSpec::Socket(path) => {
             Some(Box::new(crate::socket::SocketEstimator::connect(path, mesh)?))

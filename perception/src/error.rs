@@ -21,6 +21,12 @@ pub enum PerceptionError {
     /// ONNX Runtime could not be loaded or failed while running.
     #[error("onnx runtime: {0}")]
     OnnxRuntime(String),
+    /// A backend this build left out (`make demo` builds only what the demo runs).
+    #[error(
+        "perception backend {backend} is not in this build (built without the `{feature}` \
+         feature; `cargo build --release` builds every backend)"
+    )]
+    NotBuilt { backend: &'static str, feature: &'static str },
     /// A backend name the CLI does not know.
     #[error(
         "unknown perception backend {0:?} (expected icp, mono, onnx:MODEL.onnx, socket:PATH or none)"

@@ -17,8 +17,10 @@ pub mod frame;
 pub mod icp;
 pub mod metrics;
 pub mod models;
+#[cfg(feature = "mono")]
 pub mod mono;
 pub mod normalize;
+#[cfg(feature = "onnx")]
 pub mod onnx;
 pub mod pnp;
 pub mod pose;

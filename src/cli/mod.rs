@@ -7,6 +7,10 @@ pub mod campaign;
 pub mod check;
 pub mod device_flags;
 pub mod eval;
+#[cfg(feature = "export")]
+pub mod export;
+#[cfg(not(feature = "export"))]
+#[path = "export_absent.rs"]
 pub mod export;
 pub mod park;
 pub mod plan;
