@@ -8,12 +8,16 @@
 SHELL := /bin/bash
 CARGO ?= cargo
 
-.PHONY: all setup build demo test test-rust lint bench clean-deps test-lerobot test-slurm
+.PHONY: all setup setup-libs build demo test test-rust lint bench clean-deps test-lerobot test-slurm
 
 all: build
 
 setup:
 	@bash scripts/setup.sh
+
+# Debian packages and shared libraries only (no Python test peers).
+setup-libs:
+	@bash scripts/setup.sh --no-peers
 
 build: setup
 	$(CARGO) build --release
@@ -21,25 +25,32 @@ build: setup
 # The demo builds what it runs (the stub; not the exporter, the mono and ONNX backends: Cargo.toml's
 # features) and needs the shared libraries but none of the Python test peers; `make build`,
 # `make test` and `make bench` build everything.
-demo:
-	@bash scripts/setup.sh --no-peers
+demo: setup-libs
 	$(CARGO) build --release --no-default-features --features stub
 	@bash scripts/demo.sh
 
 # The trigger box's firmware and box-sim first: tests/trigger_box_sim.rs runs `hitl` against them.
-test: setup firmware test-rust lint
+test: setup-libs firmware test-rust lint
 
-# With cargo-nextest installed the test binaries run side by side (.config/nextest.toml keeps
+# The Python test peers install while the tests build (the build needs none of them). With
+# cargo-nextest installed the test binaries then run side by side (.config/nextest.toml keeps
 # apart what must not share the machine); without it, cargo test runs them one after another.
+# Doc tests run when a doc comment holds one (none does today: examples live in tests/; rustdoc
+# took 74 s to find none).
+NEXTEST := $(shell $(CARGO) nextest --version >/dev/null 2>&1 && echo yes)
 test-rust:
-	@if $(CARGO) nextest --version >/dev/null 2>&1; then \
-	  echo "$(CARGO) nextest run --release --workspace --all-targets --no-fail-fast"; \
-	  $(CARGO) nextest run --release --workspace --all-targets --no-fail-fast; \
-	else \
-	  echo "$(CARGO) test --release --workspace --all-targets --no-fail-fast (no cargo-nextest)"; \
-	  $(CARGO) test --release --workspace --all-targets --no-fail-fast; \
-	fi
-	$(CARGO) test --release --workspace --doc
+	@bash scripts/setup.sh > .deps/setup-peers.log 2>&1 & peers=$$!; \
+	  $(CARGO) test --release --workspace --all-targets --no-run; built=$$?; \
+	  wait $$peers || { cat .deps/setup-peers.log; exit 1; }; cat .deps/setup-peers.log; \
+	  exit $$built
+ifeq ($(NEXTEST),yes)
+	$(CARGO) nextest run --release --workspace --all-targets --no-fail-fast
+else
+	@echo "no cargo-nextest: cargo test runs the test binaries one after another"
+	$(CARGO) test --release --workspace --all-targets --no-fail-fast
+endif
+	@if bash scripts/has_doctests.sh; then $(CARGO) test --release --workspace --doc; \
+	  else echo "no doc tests in the crates' docs (examples live in tests/)"; fi
 
 # lint: rustfmt, clippy on everything, and clippy on the controller without its optional features
 # (no stub, exporter, mono or ONNX backend: a real-hardware-only build must build clean too). Clippy with --release reuses `make demo`'s

@@ -17,7 +17,7 @@ SIM_LIBS := -lsimavr -lutil
 
 .PHONY: firmware firmware-build firmware-check
 
-firmware: setup
+firmware: setup-libs
 	@$(MAKE) --no-print-directory firmware-build
 
 firmware-build: $(FW_OUT)/trigger-box.elf $(FW_OUT)/trigger-box.hex $(FW_OUT)/box-sim $(FW_OUT)/proto-test
