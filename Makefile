@@ -59,8 +59,11 @@ endif
 # whole workspace so that dependencies keep the features the first pass checked them with: only
 # hitl and hitl-perception are checked again (`-p hitl` alone re-checked a third of the tree,
 # 58 s); the price is that a dependency feature only the stub asks for would not be noticed missing.
+# check_shared_features.py: make demo's and make test's builds ask every shared crate for the
+# same features (else make test rebuilds it and everything above it).
 lint:
 	$(CARGO) fmt --all -- --check
+	@python3 scripts/check_shared_features.py
 	$(CARGO) clippy --release --workspace --all-targets -- -D warnings
 	$(CARGO) clippy --release --workspace --lib --bins --no-default-features -- -D warnings
 
