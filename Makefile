@@ -2,8 +2,8 @@
 #   make demo   set up, then run a stub campaign: play a preset trajectory, record it, report it
 #   make test   set up, build the trigger box's firmware and box-sim, then run every test (Rust,
 #               Python peers, the firmware in box-sim through hitl), fmt and clippy. The tests
-#               build with --release: they reuse `make demo`'s optimised dependencies and play the
-#               same `hitl` binary (Cargo.toml's profiles say why).
+#               build with --release: they reuse `make demo`'s optimised dependencies (hitl and
+#               hitl-perception are built again with every feature; Cargo.toml says why).
 #   make firmware / firmware-check   the trigger box's firmware and box-sim (docs/trigger-box.md)
 SHELL := /bin/bash
 CARGO ?= cargo
@@ -39,7 +39,7 @@ test: setup-libs firmware test-rust lint
 # took 74 s to find none).
 NEXTEST := $(shell $(CARGO) nextest --version >/dev/null 2>&1 && echo yes)
 test-rust:
-	@bash scripts/setup.sh > .deps/setup-peers.log 2>&1 & peers=$$!; \
+	@bash scripts/setup.sh --peers-only > .deps/setup-peers.log 2>&1 & peers=$$!; \
 	  $(CARGO) test --release --workspace --all-targets --no-run; built=$$?; \
 	  wait $$peers || { cat .deps/setup-peers.log; exit 1; }; cat .deps/setup-peers.log; \
 	  exit $$built
@@ -53,9 +53,10 @@ endif
 	  else echo "no doc tests in the crates' docs (examples live in tests/)"; fi
 
 # lint: rustfmt, clippy on everything, and clippy on the controller without its optional features
-# (no stub, exporter, mono or ONNX backend: a real-hardware-only build must build clean too). Clippy with --release reuses `make demo`'s
-# build scripts and proc macros (ruckig's C++, bindings): in the dev profile it built them all
-# again, 6 min 48 s from an empty target/debug against 3 min here. The stub-less pass selects the
+# (no stub, exporter, mono or ONNX backend: a real-hardware-only build must build clean too).
+# Clippy with --release reuses `make demo`'s build scripts and proc macros (ruckig's C++,
+# bindings): in the dev profile it built them all again, 6 min 48 s from an empty target/debug
+# against 3 min here. The stub-less pass selects the
 # whole workspace so that dependencies keep the features the first pass checked them with: only
 # hitl and hitl-perception are checked again (`-p hitl` alone re-checked a third of the tree,
 # 58 s); the price is that a dependency feature only the stub asks for would not be noticed missing.

@@ -19,11 +19,15 @@
 #                trigger box's firmware and box-sim, docs/trigger-box.md), when missing and we
 #                are root
 set -euo pipefail
-PEERS=1
+# --no-peers: Debian packages and shared libraries only; --peers-only: the Python test peers only
+# (`make test` installs them while the tests build, after `--no-peers` has run: it leaves the
+# libraries the running build links against alone).
+PEERS=1 LIBS=1
 case "${1:-}" in
   --no-peers) PEERS=0 ;;
+  --peers-only) LIBS=0 ;;
   "") ;;
-  *) echo "usage: scripts/setup.sh [--no-peers]" >&2; exit 2 ;;
+  *) echo "usage: scripts/setup.sh [--no-peers | --peers-only]" >&2; exit 2 ;;
 esac
 cd "$(dirname "$0")/.."
 ROOT=$(pwd)
@@ -37,6 +41,7 @@ mkdir -p "$LIB" "$DEPS/wheels"
 
 say() { printf 'setup: %s\n' "$*"; }
 
+if [ $LIBS = 1 ]; then
 # --- Debian packages the build needs -------------------------------------------------------
 need_pkgs=()
 for p in pkg-config libudev-dev libzstd-dev rt-tests libegl1 libegl-mesa0 libgl1-mesa-dri ffmpeg \
@@ -86,6 +91,7 @@ ln -sf "libmujoco.so.$MUJOCO_VERSION" "$LIB/libmujoco.so"
 ln -sf "libonnxruntime.so.$ORT_VERSION" "$LIB/libonnxruntime.so"
 ln -sf "libOrbbecSDK.so.$ORBBEC_SDK_VERSION" "$LIB/libOrbbecSDK.so"
 ln -sf "libOrbbecSDK.so.$ORBBEC_SDK_VERSION" "$LIB/libOrbbecSDK.so.2"
+fi
 
 # --- Python venv with the test peers --------------------------------------------------------
 if [ $PEERS = 0 ]; then
