@@ -52,6 +52,10 @@ pub struct SilhouetteRenderer {
     grown: Vec<u8>,
     disc: Vec<(i32, i32)>,
     disc_radius: u32,
+    /// Scratch: each vertex in the camera frame and its pixel (NaN behind the near plane), so a
+    /// vertex shared by several faces is moved and projected once.
+    cam: Vec<Vector3<f64>>,
+    uv: Vec<(f64, f64)>,
 }
 
 impl SilhouetteRenderer {
@@ -84,6 +88,8 @@ impl SilhouetteRenderer {
             grown: Vec::new(),
             disc: Vec::new(),
             disc_radius: 0,
+            cam: Vec::new(),
+            uv: Vec::new(),
         })
     }
 
@@ -139,17 +145,37 @@ impl SilhouetteRenderer {
         }
         let r = camera_t_target.rotation.to_rotation_matrix();
         let t = camera_t_target.translation.vector;
+        self.cam.clear();
+        self.cam.extend(self.vertices.iter().map(|v| r * v + t));
+        self.uv.clear();
+        self.uv.extend(self.cam.iter().map(|q| {
+            if q.z >= NEAR_M {
+                k.project(q.x, q.y, q.z)
+            } else {
+                (f64::NAN, f64::NAN)
+            }
+        }));
+        let in_front =
+            |f: &[u32; 3], cam: &[Vector3<f64>]| f.iter().all(|&i| cam[i as usize].z >= NEAR_M);
         // Only the target's box in the image is drawn, cleared and scanned: the rest is 0.
         let mut bx = Window::EMPTY;
         for &(f, is_target) in &self.faces {
-            if is_target {
-                let tri = f.map(|i| r * self.vertices[i as usize] + t);
-                let mut poly = [Vector3::zeros(); 4];
-                let m = clip_near(&tri, &mut poly);
-                for q in &poly[..m] {
-                    let (u, v) = k.project(q.x, q.y, q.z);
+            if !is_target {
+                continue;
+            }
+            if in_front(&f, &self.cam) {
+                for i in f {
+                    let (u, v) = self.uv[i as usize];
                     bx.add(u, v);
                 }
+                continue;
+            }
+            let tri = f.map(|i| self.cam[i as usize]);
+            let mut poly = [Vector3::zeros(); 4];
+            let m = clip_near(&tri, &mut poly);
+            for q in &poly[..m] {
+                let (u, v) = k.project(q.x, q.y, q.z);
+                bx.add(u, v);
             }
         }
         let Some(bx) = bx.in_image(w, h) else {
@@ -159,22 +185,29 @@ impl SilhouetteRenderer {
             self.depth[v * w + bx.u0..=v * w + bx.u1].fill(f32::INFINITY);
             self.owner[v * w + bx.u0..=v * w + bx.u1].fill(0);
         }
+        let mut raster = Raster {
+            w,
+            h: k.height as usize,
+            bx: &bx,
+            depth: &mut self.depth,
+            owner: &mut self.owner,
+            face: &mut self.face,
+        };
         for (id, &(f, is_target)) in self.faces.iter().enumerate() {
-            let tri = f.map(|i| r * self.vertices[i as usize] + t);
+            let drawn = Drawing { is_target, id: id as u32 };
+            if in_front(&f, &self.cam) {
+                let uv = f.map(|i| self.uv[i as usize]);
+                let iz = f.map(|i| 1.0 / self.cam[i as usize].z);
+                raster.fill(uv, iz, drawn);
+                continue;
+            }
+            let tri = f.map(|i| self.cam[i as usize]);
             let mut poly = [Vector3::zeros(); 4];
             let m = clip_near(&tri, &mut poly);
-            let drawn = Drawing { is_target, id: id as u32 };
             // A convex polygon of 3 or 4 corners: a fan of triangles.
             for j in 1..m.saturating_sub(1) {
-                fill(
-                    [poly[0], poly[j], poly[j + 1]],
-                    k,
-                    &bx,
-                    drawn,
-                    &mut self.depth,
-                    &mut self.owner,
-                    &mut self.face,
-                );
+                let p = [poly[0], poly[j], poly[j + 1]];
+                raster.fill(p.map(|q| k.project(q.x, q.y, q.z)), p.map(|q| 1.0 / q.z), drawn);
             }
         }
         let mut silhouette_px = 0;
@@ -345,56 +378,59 @@ struct Drawing {
     id: u32,
 }
 
-/// Fills one camera-frame triangle (in front of the near plane) with a depth test, inside the
-/// window `bx`, into the depth and owner buffers (and `face`, unless it is empty).
-fn fill(
-    p: [Vector3<f64>; 3],
-    k: &Intrinsics,
-    bx: &Window,
-    drawn: Drawing,
-    depth: &mut [f32],
-    owner: &mut [u8],
-    face: &mut [u32],
-) {
-    let w = k.width as usize;
-    let uv = p.map(|q| k.project(q.x, q.y, q.z));
-    let area = edge(uv[0], uv[1], uv[2]);
-    if area.abs() < 1e-12 || !area.is_finite() {
-        return;
-    }
-    let mut b = Window::EMPTY;
-    for (u, v) in uv {
-        b.add(u, v);
-    }
-    let Some(tb) = b.in_image(k.width as usize, k.height as usize) else {
-        return;
-    };
-    let (u0, v0) = (tb.u0.max(bx.u0), tb.v0.max(bx.v0));
-    let (u1, v1) = (tb.u1.min(bx.u1), tb.v1.min(bx.v1));
-    if u0 > u1 || v0 > v1 {
-        return;
-    }
-    let inv = 1.0 / area;
-    let iz = p.map(|q| 1.0 / q.z);
-    let label = if drawn.is_target { 1 } else { 2 };
-    for v in v0..=v1 {
-        let row = v * w;
-        for u in u0..=u1 {
-            let q = (u as f64, v as f64);
-            let b0 = edge(uv[1], uv[2], q) * inv;
-            let b1 = edge(uv[2], uv[0], q) * inv;
-            let b2 = edge(uv[0], uv[1], q) * inv;
-            if b0 < 0.0 || b1 < 0.0 || b2 < 0.0 {
-                continue;
-            }
-            // 1/z is affine in the image: perspective-correct depth.
-            let z = (1.0 / (b0 * iz[0] + b1 * iz[1] + b2 * iz[2])) as f32;
-            let i = row + u;
-            if z < depth[i] {
-                depth[i] = z;
-                owner[i] = label;
-                if let Some(f) = face.get_mut(i) {
-                    *f = drawn.id;
+/// The buffers one drawing fills, inside the window `bx`.
+struct Raster<'a> {
+    w: usize,
+    h: usize,
+    bx: &'a Window,
+    depth: &'a mut [f32],
+    owner: &'a mut [u8],
+    face: &'a mut [u32],
+}
+
+impl Raster<'_> {
+    /// Fills one triangle in front of the near plane, given by its corners' pixels `uv` and
+    /// inverse depths `iz`, with a depth test into the depth and owner buffers (and `face`,
+    /// unless it is empty).
+    fn fill(&mut self, uv: [(f64, f64); 3], iz: [f64; 3], drawn: Drawing) {
+        let area = edge(uv[0], uv[1], uv[2]);
+        if area.abs() < 1e-12 || !area.is_finite() {
+            return;
+        }
+        let mut b = Window::EMPTY;
+        for (u, v) in uv {
+            b.add(u, v);
+        }
+        let Some(tb) = b.in_image(self.w, self.h) else {
+            return;
+        };
+        let bx = self.bx;
+        let (u0, v0) = (tb.u0.max(bx.u0), tb.v0.max(bx.v0));
+        let (u1, v1) = (tb.u1.min(bx.u1), tb.v1.min(bx.v1));
+        if u0 > u1 || v0 > v1 {
+            return;
+        }
+        let inv = 1.0 / area;
+        let label = if drawn.is_target { 1 } else { 2 };
+        for v in v0..=v1 {
+            let row = v * self.w;
+            for u in u0..=u1 {
+                let q = (u as f64, v as f64);
+                let b0 = edge(uv[1], uv[2], q) * inv;
+                let b1 = edge(uv[2], uv[0], q) * inv;
+                let b2 = edge(uv[0], uv[1], q) * inv;
+                if b0 < 0.0 || b1 < 0.0 || b2 < 0.0 {
+                    continue;
+                }
+                // 1/z is affine in the image: perspective-correct depth.
+                let z = (1.0 / (b0 * iz[0] + b1 * iz[1] + b2 * iz[2])) as f32;
+                let i = row + u;
+                if z < self.depth[i] {
+                    self.depth[i] = z;
+                    self.owner[i] = label;
+                    if let Some(f) = self.face.get_mut(i) {
+                        *f = drawn.id;
+                    }
                 }
             }
         }
