@@ -4,7 +4,8 @@
 # (--mask rendered) and the Orbbec stereo depth model (--depth-model orbbec), ICP on the
 # ground-truth mesh, lab scene, on the simulated clock (every capture rendered and estimated, the
 # same figures on any machine); each run scored by `hitl eval`. Prints one Markdown table.
-#   usage: scripts/sitl_real_path.sh [TARGET...]   (default: asymmetric one-plane two-planes)
+#   usage: scripts/sitl_real_path.sh [TARGET...]   (default: asymmetric one-plane two-planes; a
+#   built-in's name or an .obj/.stl path, whose file name names its outputs)
 #   HITL=path picks the binary (default ./target/release/hitl); RANGE=M the range (default 10).
 set -euo pipefail
 cd "$(dirname "$0")/.."
@@ -19,12 +20,13 @@ $HITL plan --preset flyaround --range-m "$RANGE" --duration-s 20 --capture-every
 echo "| range_m | target | frames | failures | mean e_t [m] | e_t / range | mean e_r [deg] | median e_r [deg] | goal (<= 2 % failed, e_r <= 1 deg, e_t <= 0.5 %) |"
 echo "| --- | --- | --- | --- | --- | --- | --- | --- | --- |"
 for t in "${TARGETS[@]}"; do
-  rec="$OUT/$t.mcap"
+  name=$(basename "$t")
+  rec="$OUT/$name.mcap"
   $HITL run "$plan" --record "$rec" --camera sim --camera-preset orbbec --camera-size 1280x800 \
     --light sim --perception icp --mask rendered --depth-model orbbec --target-model "$t" --clock sim \
-    --plain >"$OUT/$t.log" 2>&1 || [ $? -eq 4 ]
-  $HITL eval "$rec" --json >"$OUT/$t.json"
-  python3 - "$OUT/$t.json" "$RANGE" "$t" <<'PY'
+    --plain >"$OUT/$name.log" 2>&1 || [ $? -eq 4 ]
+  $HITL eval "$rec" --json >"$OUT/$name.json"
+  python3 - "$OUT/$name.json" "$RANGE" "$name" <<'PY'
 import json, sys
 m = json.load(open(sys.argv[1])); r = float(sys.argv[2])
 f = m["frames"]; fail = m["failures"]

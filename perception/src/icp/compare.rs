@@ -9,10 +9,11 @@
 //! into a pull toward whichever surface is nearest (at a crease, the other face), which on the
 //! Orbbec model's depth biased a registration by degrees; pairing by pixel does not.
 //!
-//! Registration ranks its final, polished candidates with this ([`super::IcpTracker`]): the
-//! cheaper tests it uses earlier (model samples inside the mask, scene points near the model)
-//! score a pose that leaves part of the target unexplained as well as one that explains all
-//! of it, and at a far range, where the target spans a few hundred pixels, a look-alike pose
+//! Registration fits and ranks its final candidates by the drawing's disagreement with the
+//! frame ([`Comparer::disagreement`], [`super::fit`]); tracking refines each tracked pose by it:
+//! the cheaper tests used earlier (model samples inside the mask, scene points near the model)
+//! score a pose that leaves part of the target unexplained as well as one that explains all of
+//! it, and at a far range, where the target spans a few hundred pixels, a look-alike pose
 //! (turned about an axis that is no symmetry of the target) passes them.
 
 use super::align::Steps;
@@ -40,6 +41,8 @@ pub struct Comparer {
     residuals: Vec<f64>,
     /// The frame's target pixels' box ([`Self::prepare`]).
     target_box: Option<[usize; 4]>,
+    /// How many target pixels the frame has ([`Self::prepare`]): the agreement's unit.
+    target_pixels: usize,
     /// The tracker's model scale over the drawn mesh's.
     pub scale: f64,
 }
@@ -62,6 +65,7 @@ impl Comparer {
             pairs: Vec::new(),
             residuals: Vec::new(),
             target_box: None,
+            target_pixels: 0,
             scale: 1.0,
         })
     }
@@ -75,14 +79,16 @@ impl Comparer {
     }
 
     /// The box of the frame's target pixels (in the mask, with depth no farther than `far_m`),
-    /// pixels (u0, v0, u1, v1 inclusive); set before comparing on a frame ([`Self::prepare`]).
+    /// pixels (u0, v0, u1, v1 inclusive), and their count; set before comparing on a frame.
     pub fn prepare(&mut self, frame: &PerceptionFrame, far_m: f64) {
         let w = frame.intrinsics.width as usize;
         let mut bx: Option<[usize; 4]> = None;
+        self.target_pixels = 0;
         for i in (0..frame.depth_m.len()).filter(|&i| frame.is_target(i)) {
             if f64::from(frame.depth_m[i]) > far_m {
                 continue;
             }
+            self.target_pixels += 1;
             let (u, v) = (i % w, i / w);
             bx = Some(match bx {
                 None => [u, v, u, v],
@@ -176,18 +182,27 @@ impl Comparer {
         Some((eq.apply(t, &x), done))
     }
 
-    /// Fraction of the judged pixels on which the pose at `pose` agrees with the frame.
+    /// How much of the frame the pose at `pose` leaves unexplained, in target pixels.
     ///
     /// Judged: every pixel the drawn target covers, and every target pixel of the frame (in the
     /// mask, with depth no farther than `far_m`: farther is what a mask with a margin shows behind
-    /// the outline). A pixel agrees when both say target and the depths are within `tol`, or the
-    /// frame has no depth there (a stereo camera has none at edges and in shadows). It disagrees
-    /// when only one says target, or the depths differ by more than `tol` (drawn in front of the
-    /// observed surface: free space; behind it: the frame sees something nearer).
-    pub fn agreement(&mut self, frame: &PerceptionFrame, pose: &Pose, tol: f64, far_m: f64) -> f64 {
+    /// the outline). A pixel only one of them calls target costs 1. Where both do, the depths'
+    /// difference `d` costs `min((d / tol)^2, 1)`: a truncated quadratic, so within the noise the
+    /// cost still says which pose lies closer to the observed surface, and a pixel off by more
+    /// (drawn in front of the observed surface: free space; behind it: the frame sees something
+    /// nearer) costs what a silhouette miss does. Costing nothing: a target pixel without depth
+    /// (a stereo camera has none at edges and in shadows), and a drawn pixel outside the mask
+    /// where the frame sees something nearer than the drawing (the stand in front of the
+    /// target: what it hides is no evidence against the pose).
+    pub fn disagreement(
+        &mut self,
+        frame: &PerceptionFrame,
+        pose: &Pose,
+        tol: f64,
+        far_m: f64,
+    ) -> f64 {
         let window = self.draw(frame, pose);
         let w = frame.intrinsics.width as usize;
-        let (mut agree, mut disagree) = (0usize, 0usize);
         // Off both boxes neither says target: only their union is looked at.
         let union = match (window, self.target_box) {
             (Some(a), Some(b)) => {
@@ -195,36 +210,41 @@ impl Comparer {
             }
             (a, b) => a.or(b),
         };
+        let mut cost = 0.0;
         for i in pixels(union, w) {
-            let d = self.drawn[i];
             let observed = f64::from(frame.depth_m[i]);
             let has_depth = observed.is_finite() && observed > 0.0;
             let in_mask = frame.in_silhouette(i);
-            if d != TARGET {
+            if self.drawn[i] != TARGET {
                 if in_mask && has_depth && observed <= far_m {
-                    disagree += 1;
+                    cost += 1.0;
                 }
-                continue;
-            }
-            if !in_mask {
-                disagree += 1;
-                continue;
-            }
-            if !has_depth {
-                agree += 1;
-                continue;
-            }
-            if (observed - self.drawn_depth(i)).abs() <= tol {
-                agree += 1;
-            } else {
-                disagree += 1;
+            } else if !in_mask {
+                if !(has_depth && observed < self.drawn_depth(i) - tol) {
+                    cost += 1.0;
+                }
+            } else if has_depth {
+                let u = (observed - self.drawn_depth(i)) / tol;
+                cost += (u * u).min(1.0);
             }
         }
-        let judged = agree + disagree;
-        if judged == 0 {
+        cost
+    }
+
+    /// How well the pose at `pose` explains the frame: 1 minus its [`Self::disagreement`] per
+    /// target pixel of the frame (1: every pixel agrees to well within the noise; 0 or less: no
+    /// better than drawing nothing). 0 on a frame without target pixels.
+    pub fn agreement(&mut self, frame: &PerceptionFrame, pose: &Pose, tol: f64, far_m: f64) -> f64 {
+        let cost = self.disagreement(frame, pose, tol, far_m);
+        self.agreement_of(cost)
+    }
+
+    /// The agreement of a pose whose [`Self::disagreement`] is `cost`.
+    pub fn agreement_of(&self, cost: f64) -> f64 {
+        if self.target_pixels == 0 {
             return 0.0;
         }
-        agree as f64 / judged as f64
+        1.0 - cost / self.target_pixels as f64
     }
 }
 

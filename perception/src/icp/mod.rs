@@ -32,6 +32,7 @@
 pub mod align;
 pub mod cloud;
 pub mod compare;
+pub mod fit;
 pub mod global;
 pub mod model;
 pub mod score;
@@ -41,6 +42,7 @@ use crate::models::Mesh;
 use crate::pose::from_rt;
 use crate::{PerceptionError, PerceptionFrame};
 use align::{align, Fit, RotationPrior};
+use fit::FitSteps;
 use hitl_hal::pose::{self, Pose};
 use model::ModelCloud;
 use nalgebra::{Matrix3, Translation3, Vector3};
@@ -92,17 +94,17 @@ pub struct IcpConfig {
     /// 1 deg, by measurement on the Orbbec model's 10 m fly-arounds: 0.3 and 0.1 deg made the
     /// prediction (its motion taken from the last two noisy estimates) lead the track astray.
     pub prior_turn_deg: f64,
-    /// Registration's last stage: its distinct candidates scoring within `polish_margin` of the
-    /// best (at most `polish_keep`: look-alikes of one another) are refined on up to
-    /// `polish_points` target pixels with up to `polish_iters` ICP steps, then on every target
-    /// pixel by `pixel_iters` pixel-wise steps, and ranked by render and compare ([`compare`]).
-    /// 4000 and 20 000 points gave the same figures (the pixel-wise steps take every pixel).
-    /// 0 points: the stage is off (the final candidates are refined on the tracking cloud and
-    /// ranked as the earlier stages; the tracker before it, with `track_pixel_iters` 0).
+    /// Registration's last stage, render and compare ([`IcpTracker::compared`]): the second
+    /// stage's distinct candidates (up to `coarse_keep`) are fitted briefly to the frame's
+    /// pixels; the `polish_keep` best are refined on up to `polish_points` target pixels with up
+    /// to `polish_iters` ICP steps, then by `pixel_iters` pixel-wise steps, fitted to convergence
+    /// and ranked by their agreement with the frame ([`compare`]). 4000 and 20 000 points gave
+    /// the same figures. 0 points: the stage is off (the best `keep` candidates are refined on
+    /// the tracking cloud and ranked as the earlier stages; tracked frames are not refined
+    /// against the pixels either).
     pub polish_points: usize,
     pub polish_iters: usize,
     pub polish_keep: usize,
-    pub polish_margin: f64,
     /// Then up to this many steps pairing every target pixel with the drawn model at that pixel
     /// ([`compare::Comparer::refine`]); 0: none.
     pub pixel_iters: usize,
@@ -110,6 +112,13 @@ pub struct IcpConfig {
     /// default: 5 took the SITL fly-around from 1.67 to 1.29 deg but each step draws the model,
     /// and on the 55 000-face sat3 a tracked frame took 3.3x as long (docs/perception.md).
     pub track_pixel_iters: usize,
+    /// Render-and-compare fitting ([`fit`]), simplex iterations: of each distinct candidate
+    /// registration's second stage leaves (up to `coarse_keep`), of each of the `polish_keep`
+    /// best of those, and of each tracked frame after its ICP; 0: off. Only with the last stage
+    /// on (`polish_points` > 0).
+    pub screen_fit_iters: u64,
+    pub fit_iters: u64,
+    pub track_fit_iters: u64,
 }
 
 impl Default for IcpConfig {
@@ -137,9 +146,11 @@ impl Default for IcpConfig {
             polish_points: 4000,
             polish_iters: 60,
             polish_keep: 4,
-            polish_margin: 0.1,
             pixel_iters: 20,
             track_pixel_iters: 0,
+            screen_fit_iters: 60,
+            fit_iters: 300,
+            track_fit_iters: 100,
         }
     }
 }
@@ -197,6 +208,14 @@ pub struct IcpTracker {
 /// Frames a lost track's motion is carried on for; after that, registration has no prior.
 const MAX_EXTRAPOLATED: u32 = 10;
 
+/// Render-and-compare fitting's first simplex in registration: 2 deg and 1 % of the model's size
+/// (the second stage leaves its candidates a few degrees from where they settle); in tracking,
+/// 0.5 deg and 0.2 % (a tracked pose is within its noise of the best).
+const FIT_TURN_RAD: f64 = 2.0 * std::f64::consts::PI / 180.0;
+const FIT_SHIFT: f64 = 0.01;
+const TRACK_FIT_TURN_RAD: f64 = 0.5 * std::f64::consts::PI / 180.0;
+const TRACK_FIT_SHIFT: f64 = 0.002;
+
 /// A turn larger than this between consecutive captures is a jump between look-alike poses, not
 /// the target's motion (a fly-around turns a few degrees per capture), so it is not carried on.
 const MAX_TURN_PER_FRAME_RAD: f64 = std::f64::consts::FRAC_PI_4;
@@ -207,13 +226,17 @@ struct Scored {
     fit: Fit,
     silhouette: f64,
     violation: f64,
-    /// Render and compare's pixel agreement ([`compare`]); 1 where it was not run.
-    agreement: f64,
+    /// Render and compare's agreement ([`compare::Comparer::agreement`]), where it was run:
+    /// then it alone ranks the pose (it judges every pixel the other terms judge on samples).
+    agreement: Option<f64>,
 }
 
 impl Scored {
     fn score(&self) -> f64 {
-        self.fit.inlier_frac * self.silhouette * (1.0 - self.violation) * self.agreement
+        match self.agreement {
+            Some(a) => a,
+            None => self.fit.inlier_frac * self.silhouette * (1.0 - self.violation),
+        }
     }
 }
 
@@ -222,12 +245,12 @@ impl std::fmt::Display for Scored {
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
         write!(
             f,
-            "score {:.3} (inliers {:.3} silhouette {:.3} violation {:.3} agreement {:.3})",
+            "score {:.3} (inliers {:.3} silhouette {:.3} violation {:.3} agreement {})",
             self.score(),
             self.fit.inlier_frac,
             self.silhouette,
             self.violation,
-            self.agreement
+            self.agreement.map_or("-".into(), |a| format!("{a:.3}"))
         )
     }
 }
@@ -297,7 +320,7 @@ impl IcpTracker {
             behind_others,
             self.far_m,
         );
-        Scored { fit, silhouette: img.silhouette, violation: img.violation, agreement: 1.0 }
+        Scored { fit, silhouette: img.silhouette, violation: img.violation, agreement: None }
     }
 
     fn acceptable(&self, s: &Scored) -> bool {
@@ -327,17 +350,18 @@ impl IcpTracker {
         let dense = cloud::thin(scene, self.cfg.coarse_points * 2);
         let c = cloud::centroid(&sparse);
         let d = self.model.diameter;
-        let (tol, pixel_tol) = (self.tol(), self.pixel_tol());
+        let (tol, pixel_tol, far) = (self.tol(), self.pixel_tol(), self.far_m);
+        let model = &self.model;
         let rank = |cloud: &[Vector3<f64>], init: &Pose, iters: usize, max_dist: f64| {
-            let fit = align(&self.model, cloud, init, iters, max_dist, 2.0 * tol, false, None);
+            let fit = align(model, cloud, init, iters, max_dist, 2.0 * tol, false, None);
             let img = score::check_strided(
-                &self.model,
+                model,
                 frame,
                 &fit.pose,
                 2.0 * pixel_tol,
                 16,
                 Hidden::Miss,
-                self.far_m,
+                far,
             );
             (fit.inlier_frac * img.silhouette * (1.0 - img.violation), fit.pose)
         };
@@ -356,8 +380,12 @@ impl IcpTracker {
         let mut cands: Vec<(f64, Pose)> =
             cands.iter().map(|(_, p)| rank(&dense, p, self.cfg.coarse_iters, 0.15 * d)).collect();
         cands.sort_by(|a, b| b.0.total_cmp(&a.0));
-        let cands = if self.cfg.polish_points > 0 {
-            self.distinct(cands)
+        // The last stage compares every distinct candidate with the frame pixel by pixel: the
+        // ranks so far come from nearest-sample fits that a small, noisy view biases by degrees,
+        // so the true pose's basin can rank below a dozen look-alikes.
+        let compare = self.cfg.polish_points > 0 && !pixels.is_empty();
+        let cands = if compare {
+            self.distinct(cands, self.cfg.coarse_keep)
         } else {
             cands.into_iter().take(self.cfg.keep).collect()
         };
@@ -365,16 +393,15 @@ impl IcpTracker {
             let s: Vec<String> = cands.iter().map(|c| format!("{:.3}", c.0)).collect();
             debug_line!("icp registration candidates: {} ({:?})", s.join(" "), t0.elapsed());
         }
-        let mut checked: Vec<Scored> = cands
-            .iter()
-            .map(|(_, p)| self.full_check(frame, scene, p, Hidden::Miss, None))
-            .collect();
         // The priors take the second stage's wider capture radius first, like the grid's best.
-        for p in priors {
-            let (_, near) = rank(&dense, p, self.cfg.coarse_iters, 0.15 * d);
-            checked.push(self.full_check(frame, scene, &near, Hidden::Miss, None));
-        }
-        let checked = self.polished(frame, pixels, checked);
+        let starts: Vec<Pose> = (cands.iter().map(|c| c.1))
+            .chain(priors.iter().map(|p| rank(&dense, p, self.cfg.coarse_iters, 0.15 * d).1))
+            .collect();
+        let checked: Vec<Scored> = if compare {
+            self.compared(frame, pixels, &starts)
+        } else {
+            starts.iter().map(|p| self.full_check(frame, scene, p, Hidden::Miss, None)).collect()
+        };
         let best = checked.iter().max_by(|a, b| a.score().total_cmp(&b.score())).copied();
         let Some(p) = priors.first() else {
             return best;
@@ -396,14 +423,13 @@ impl IcpTracker {
             .or(best)
     }
 
-    /// The best `keep` of ranked hypotheses, no two the same pose (within a degree and 1 % of
+    /// The best `n` of ranked hypotheses, no two the same pose (within a degree and 1 % of
     /// the model's size): at a far range many grid rotations converge to one pose, and the
-    /// look-alike poses the last stage has to tell apart would not reach it. (With the last
-    /// stage off, `polish_points` 0, the best `keep` as they come.)
-    fn distinct(&self, ranked: Vec<(f64, Pose)>) -> Vec<(f64, Pose)> {
-        let mut out: Vec<(f64, Pose)> = Vec::with_capacity(self.cfg.keep);
+    /// look-alike poses the last stage has to tell apart would not reach it.
+    fn distinct(&self, ranked: Vec<(f64, Pose)>, n: usize) -> Vec<(f64, Pose)> {
+        let mut out: Vec<(f64, Pose)> = Vec::with_capacity(n);
         for (score, pose) in ranked {
-            if out.len() >= self.cfg.keep {
+            if out.len() >= n {
                 break;
             }
             if !out.iter().any(|(_, p)| self.same_pose(p, &pose)) {
@@ -419,104 +445,166 @@ impl IcpTracker {
             && (a.translation.vector - b.translation.vector).norm() < 0.01 * self.model.diameter
     }
 
-    /// Registration's last stage: the candidates within `polish_margin` of the best (at most
-    /// `polish_keep`, and not two within a degree of each other) refined on the dense cloud and
-    /// ranked with render and compare; the others are dropped. Off (`polish_points` 0): as given.
-    fn polished(
+    /// Registration's last stage, render and compare ([`compare`], [`fit`]): each start fitted
+    /// briefly (`screen_fit_iters`) to the frame's pixels; the `polish_keep` best of those (not
+    /// two the same pose) refined by ICP on every target pixel (`polish_points`, `polish_iters`)
+    /// and pixel-wise steps (`pixel_iters`), each kept only where the frame agrees better, then
+    /// fitted to convergence (`fit_iters`) and ranked by their agreement with the frame.
+    fn compared(
         &mut self,
         frame: &PerceptionFrame,
-        dense: &[Vector3<f64>],
-        mut checked: Vec<Scored>,
+        pixels: &[Vector3<f64>],
+        starts: &[Pose],
     ) -> Vec<Scored> {
-        if self.cfg.polish_points == 0 || dense.is_empty() {
-            return checked;
-        }
         self.comparer.prepare(frame, self.far_m);
         let t0 = std::time::Instant::now();
-        checked.sort_by(|a, b| b.score().total_cmp(&a.score()));
-        let top = checked.first().map_or(f64::NEG_INFINITY, Scored::score);
+        let (tol, far, d) = (self.pixel_tol(), self.far_m, self.model.diameter);
+        let screen = FitSteps { turn_rad: FIT_TURN_RAD, shift_m: FIT_SHIFT * d, iters: 0 };
+        let mut screened: Vec<(f64, Pose)> = starts
+            .iter()
+            .map(|p| {
+                let steps = FitSteps { iters: self.cfg.screen_fit_iters, ..screen };
+                let (pose, cost) = fit::fit(&mut self.comparer, frame, p, steps, tol, far);
+                (cost, pose)
+            })
+            .collect();
+        screened.sort_by(|a, b| a.0.total_cmp(&b.0));
+        if debug() {
+            let l: Vec<String> = screened.iter().map(|(c, _)| format!("{c:.1}")).collect();
+            debug_line!("icp screened (disagreement, px): {}", l.join(" "));
+        }
         let mut picked: Vec<Pose> = Vec::new();
         let mut out = Vec::new();
-        for c in checked.iter().filter(|c| c.score() >= top - self.cfg.polish_margin) {
+        for (_, start) in screened {
             if picked.len() >= self.cfg.polish_keep.max(1) {
                 break;
             }
-            if picked.iter().any(|p| self.same_pose(p, &c.fit.pose)) {
+            if picked.iter().any(|p| self.same_pose(p, &start)) {
                 continue;
             }
-            picked.push(c.fit.pose);
-            let fit = align(
-                &self.model,
-                dense,
-                &c.fit.pose,
-                self.cfg.polish_iters,
-                self.cfg.track_max_dist_rel * self.model.diameter,
-                self.tol(),
-                true,
-                None,
-            );
-            let (tol, far) = (self.pixel_tol(), self.far_m);
-            let mut fit = fit;
-            let mut agreement = self.comparer.agreement(frame, &fit.pose, tol, far);
-            if self.cfg.pixel_iters > 0 {
-                // On a view of a few hundred pixels the pixel-wise steps can slide off: kept only
-                // if the frame agrees at least as well.
-                let pose = self.comparer.refine(frame, &fit.pose, self.cfg.pixel_iters, tol, far);
-                let refined = self.comparer.agreement(frame, &pose, tol, far);
-                if refined >= agreement {
-                    let (inlier_frac, rms) =
-                        align::quality(&self.model, dense, &pose, self.tol(), true);
-                    fit = Fit { pose, inlier_frac, rms };
-                    agreement = refined;
-                }
-            }
-            let img = score::check(&self.model, frame, &fit.pose, tol, Hidden::Miss, far);
+            picked.push(start);
+            let pose = self.polish(frame, pixels, &start);
+            let steps = FitSteps { iters: self.cfg.fit_iters, ..screen };
+            let (pose, cost) = fit::fit(&mut self.comparer, frame, &pose, steps, tol, far);
+            let (inlier_frac, rms) = align::quality(&self.model, pixels, &pose, self.tol(), true);
+            let img = score::check(&self.model, frame, &pose, tol, Hidden::Miss, far);
             out.push(Scored {
-                fit,
+                fit: Fit { pose, inlier_frac, rms },
                 silhouette: img.silhouette,
                 violation: img.violation,
-                agreement,
+                agreement: Some(self.comparer.agreement_of(cost)),
             });
         }
         if debug() {
             debug_line!(
-                "icp polished {} candidates on {} points ({:?})",
+                "icp compared {} starts, kept {} ({:?})",
+                starts.len(),
                 out.len(),
-                dense.len(),
                 t0.elapsed()
             );
             for (c, p) in out.iter().zip(&picked) {
                 let moved = rotation_distance(&c.fit.pose, p).to_degrees();
-                debug_line!("icp polished: {c}, moved {moved:.2} deg");
+                debug_line!("icp compared: {c}, moved {moved:.2} deg");
             }
         }
         out
     }
 
-    /// A tracked pose refined pixel by pixel (`track_pixel_iters` steps, [`compare`]): on a
-    /// stereo camera's depth the nearest-sample pairing biases it as it does a registration.
-    /// The refined pose is taken only if it explains the frame's pixels at least as well
-    /// ([`compare::Comparer::agreement`]) and turned less than a target turns between captures.
-    fn track_refined(&mut self, frame: &PerceptionFrame, s: Scored) -> Scored {
-        if self.cfg.track_pixel_iters == 0 {
-            return s;
+    /// `start` refined by ICP on every target pixel, then by pixel-wise steps, each step kept
+    /// only if the frame agrees better: on a view of a few hundred noisy pixels both can slide
+    /// off.
+    fn polish(&mut self, frame: &PerceptionFrame, pixels: &[Vector3<f64>], start: &Pose) -> Pose {
+        let (tol, far, d) = (self.pixel_tol(), self.far_m, self.model.diameter);
+        let mut best = (self.comparer.disagreement(frame, start, tol, far), *start);
+        let max_dist = self.cfg.track_max_dist_rel * d;
+        let icp = align(
+            &self.model,
+            pixels,
+            start,
+            self.cfg.polish_iters,
+            max_dist,
+            self.tol(),
+            true,
+            None,
+        );
+        let cost = self.comparer.disagreement(frame, &icp.pose, tol, far);
+        if cost < best.0 {
+            best = (cost, icp.pose);
+        }
+        if self.cfg.pixel_iters > 0 {
+            let pose = self.comparer.refine(frame, &best.1, self.cfg.pixel_iters, tol, far);
+            let cost = self.comparer.disagreement(frame, &pose, tol, far);
+            if cost < best.0 {
+                best = (cost, pose);
+            }
+        }
+        best.1
+    }
+
+    /// A tracked pose refined against the frame's pixels: from the better of the ICP fit `s` and
+    /// its `start` (on a stereo camera's depth the nearest-sample pairing biases a track as it
+    /// does a registration, by degrees on a small view), `track_pixel_iters` pixel-wise steps
+    /// ([`compare`]), then `track_fit_iters` of render-and-compare fitting ([`fit`]) from a small
+    /// simplex (a tracked pose is near), scored as a tracked fit is. `None` unless it explains
+    /// the frame better than the fit and turned less than a target turns between captures from
+    /// the start.
+    fn track_refined(
+        &mut self,
+        frame: &PerceptionFrame,
+        scene: &[Vector3<f64>],
+        s: &Scored,
+        start: &Pose,
+    ) -> Option<Scored> {
+        let (steps, fits) = (self.cfg.track_pixel_iters, self.cfg.track_fit_iters);
+        if (steps == 0 && fits == 0) || self.cfg.polish_points == 0 {
+            return None;
         }
         self.comparer.prepare(frame, self.far_m);
-        let (tol, far) = (self.pixel_tol(), self.far_m);
-        let pose = self.comparer.refine(frame, &s.fit.pose, self.cfg.track_pixel_iters, tol, far);
-        let before = self.comparer.agreement(frame, &s.fit.pose, tol, far);
-        let after = self.comparer.agreement(frame, &pose, tol, far);
-        let turn = rotation_distance(&pose, &s.fit.pose);
+        let (tol, far, d) = (self.pixel_tol(), self.far_m, self.model.diameter);
+        let before = self.comparer.disagreement(frame, &s.fit.pose, tol, far);
+        let mut best = (before, s.fit.pose);
+        // The start's turn at the fit's place: the track's rotation is often the better half.
+        let turned = Pose::from_parts(s.fit.pose.translation, start.rotation);
+        let at_start = self.comparer.disagreement(frame, &turned, tol, far);
+        if at_start < best.0 {
+            best = (at_start, turned);
+        }
+        if steps > 0 {
+            let pose = self.comparer.refine(frame, &best.1, steps, tol, far);
+            let cost = self.comparer.disagreement(frame, &pose, tol, far);
+            if cost < best.0 {
+                best = (cost, pose);
+            }
+        }
+        if fits > 0 {
+            let near = FitSteps {
+                turn_rad: TRACK_FIT_TURN_RAD,
+                shift_m: TRACK_FIT_SHIFT * d,
+                iters: fits,
+            };
+            let (pose, cost) = fit::fit(&mut self.comparer, frame, &best.1, near, tol, far);
+            best = (cost, pose);
+        }
+        let turn = rotation_distance(&best.1, start);
         if debug() {
             debug_line!(
-                "icp track refined: agreement {before:.3} -> {after:.3}, turned {:.2} deg",
-                turn.to_degrees()
+                "icp track refined: disagreement {before:.1} (from start {at_start:.1}) -> {:.1} px, {:.2} deg from the fit",
+                best.0,
+                rotation_distance(&best.1, &s.fit.pose).to_degrees()
             );
         }
-        if after < before || turn > MAX_TURN_PER_FRAME_RAD {
-            return s;
+        if best.0 >= before || turn > MAX_TURN_PER_FRAME_RAD {
+            return None;
         }
-        Scored { fit: Fit { pose, ..s.fit }, ..s }
+        let pose = best.1;
+        let (inlier_frac, rms) = align::quality(&self.model, scene, &pose, self.tol(), true);
+        let img = score::check(&self.model, frame, &pose, self.pixel_tol(), Hidden::Skipped, far);
+        Some(Scored {
+            fit: Fit { pose, inlier_frac, rms },
+            silhouette: img.silhouette,
+            violation: img.violation,
+            agreement: None,
+        })
     }
 
     /// `pose` moved so the model's camera-facing surface is centred on the scene point `at`.
@@ -608,7 +696,10 @@ impl PoseEstimator for IcpTracker {
                 );
             }
             if self.acceptable(&s) && turn <= MAX_TURN_PER_FRAME_RAD {
-                let s = self.track_refined(frame, s);
+                // Refined against the frame's pixels where that explains them better and the
+                // refined pose passes the same acceptance.
+                let refined = self.track_refined(frame, &scene, &s, start);
+                let s = refined.filter(|r| self.acceptable(r)).unwrap_or(s);
                 return Ok(self.accept(&s, EstimateKind::Tracked));
             }
         }
