@@ -23,7 +23,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     let model = TargetModel::from_spec(&target)?;
     let mesh = model.lab_mesh(scale)?;
     let cfg = icp_env::icp_config_from_env();
-    let mut tracker = IcpTracker::new(&mesh, cfg)?;
+    let mut tracker = IcpTracker::new(&mesh, cfg)?.with_symmetry(&model.lab_symmetry(scale));
     let gt: BTreeMap<u64, _> = rec.pose_gt.iter().map(|p| (p.capture_ns, p.pose)).collect();
     let mut est = BTreeMap::new();
     let t0 = std::time::Instant::now();

@@ -5,7 +5,7 @@
 
 use crate::estimator::PoseEstimator;
 use crate::icp::{IcpConfig, IcpTracker};
-use crate::models::Mesh;
+use crate::models::{Mesh, Symmetry};
 use crate::PerceptionError;
 use std::path::PathBuf;
 
@@ -42,14 +42,19 @@ impl std::str::FromStr for BackendSpec {
 
 /// Builds the backend a spec names. `mesh` is the target model at the scale the camera sees it
 /// (lab metres); the ICP tracker, the monocular baseline, mask-output ONNX models and the external estimator
-/// (which receives it in its handshake) need it. `None` gives `Ok(None)`.
+/// (which receives it in its handshake) need it. `symmetry` is the target's declared symmetry at
+/// the same scale ([`crate::TargetModel::symmetry_group`] scaled to the lab), which the ICP
+/// tracker keeps its branch by. `None` gives `Ok(None)`.
 pub fn backend_from_spec(
     spec: &BackendSpec,
     mesh: &Mesh,
+    symmetry: &Symmetry,
 ) -> Result<Option<Box<dyn PoseEstimator>>, PerceptionError> {
     Ok(match spec {
         BackendSpec::None => None,
-        BackendSpec::Icp => Some(Box::new(IcpTracker::new(mesh, IcpConfig::default())?)),
+        BackendSpec::Icp => {
+            Some(Box::new(IcpTracker::new(mesh, IcpConfig::default())?.with_symmetry(symmetry)))
+        }
         #[cfg(feature = "mono")]
         BackendSpec::Mono => {
             Some(Box::new(crate::mono::MonoTracker::new(mesh, crate::mono::MonoConfig::default())?))

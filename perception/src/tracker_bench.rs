@@ -77,7 +77,9 @@ fn bench_target(
     let scale = paper_scale(o.range_m);
     let near = scale * o.range_m;
     let mesh = model.lab_mesh(scale).map_err(|e| e.to_string())?;
-    let mut tracker = IcpTracker::new(&mesh, cfg.clone()).map_err(|e| e.to_string())?;
+    let mut tracker = IcpTracker::new(&mesh, cfg.clone())
+        .map_err(|e| e.to_string())?
+        .with_symmetry(&model.lab_symmetry(scale));
     let mut drawer = match o.rendered_mask {
         Some(_) => Some(SilhouetteRenderer::new(&mesh).map_err(|e| e.to_string())?),
         None => None,

@@ -3,6 +3,7 @@
 #![allow(clippy::unwrap_used)]
 
 use hitl_hal::Pose;
+use hitl_perception::models::Symmetry;
 use hitl_perception::socket::{SocketConfig, SocketEstimator};
 use hitl_perception::testing::{intrinsics_hfov, look_pose, render};
 use hitl_perception::{
@@ -234,7 +235,7 @@ fn backend_from_spec_builds_the_socket_backend() {
     let peer = Peer::start(&["--quiet"]);
     let spec: BackendSpec = format!("socket:{}", peer.socket.display()).parse().unwrap();
     assert_eq!(spec, BackendSpec::Socket(peer.socket.clone()));
-    let mut est = backend_from_spec(&spec, &mesh()).unwrap().unwrap();
+    let mut est = backend_from_spec(&spec, &mesh(), &Symmetry::none()).unwrap().unwrap();
     assert_eq!(est.name(), format!("socket:{}", peer.socket.display()));
     let f = frame(9);
     assert_centroid_pose(&est.estimate(&f).unwrap(), &f);
@@ -257,7 +258,11 @@ fn nothing_listening_says_start_the_estimator() {
     let missing = dir.path().join("absent.sock");
     let msg = external(SocketEstimator::connect(&missing, &mesh()));
     assert_mentions(&msg, &missing, &["no socket", "start the estimator first"]);
-    let msg = external(backend_from_spec(&BackendSpec::Socket(missing.clone()), &mesh()));
+    let msg = external(backend_from_spec(
+        &BackendSpec::Socket(missing.clone()),
+        &mesh(),
+        &Symmetry::none(),
+    ));
     assert_mentions(&msg, &missing, &["start the estimator first"]);
 
     // A socket file left behind by a peer that is gone.

@@ -241,7 +241,7 @@ fn rerun_backend(
     } else {
         recorded_policy(run_meta, path)?
     };
-    let est = backend_from_spec(&spec, &mesh)
+    let est = backend_from_spec(&spec, &mesh, &model.lab_symmetry(scale))
         .map_err(|e| e.to_string())?
         .ok_or("--backend none has nothing to run")?;
     let mut est = Reregistering::new(est, policy);

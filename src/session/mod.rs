@@ -728,7 +728,8 @@ impl CapturePath {
                     .model
                     .lab_mesh(scene.scale)
                     .map_err(|e| RunError::BadInput(e.to_string()))?;
-                let estimator = backend_from_spec(spec, &mesh)
+                let symmetry = scene.model.lab_symmetry(scene.scale);
+                let estimator = backend_from_spec(spec, &mesh, &symmetry)
                     .map_err(|e| RunError::BadInput(format!("--perception: {e}")))?;
                 match estimator {
                     None => (None, None),

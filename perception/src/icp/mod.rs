@@ -38,7 +38,7 @@ pub mod model;
 pub mod score;
 
 use crate::estimator::{Estimate, EstimateKind, PoseEstimator, ScalableEstimator};
-use crate::models::Mesh;
+use crate::models::{Mesh, Symmetry};
 use crate::pose::from_rt;
 use crate::{PerceptionError, PerceptionFrame};
 use align::{align, Fit, RotationPrior};
@@ -203,6 +203,9 @@ pub struct IcpTracker {
     far_m: f64,
     /// Draws the target for registration's render and compare.
     comparer: compare::Comparer,
+    /// The target's declared symmetries as body-frame transforms, identity first
+    /// ([`IcpTracker::with_symmetry`]): `T` and `T * S` are the same view.
+    twins: Vec<Pose>,
 }
 
 /// Frames a lost track's motion is carried on for; after that, registration has no prior.
@@ -275,7 +278,30 @@ impl IcpTracker {
             noise_tol: 0.0,
             pixel_noise_tol: 0.0,
             far_m: f64::INFINITY,
+            twins: vec![Pose::identity()],
         })
+    }
+
+    /// The target's declared symmetry (in the mesh's units: a built-in's or a sidecar's group,
+    /// scaled to the lab as the mesh is). A registration with a track to keep (after a loss)
+    /// then takes, of a symmetric target's twin poses that show the same view, the one nearest
+    /// the track: the paper's metric is not symmetry-aware, and a track that came back on the
+    /// other twin scored 180 deg for every frame after.
+    pub fn with_symmetry(mut self, symmetry: &Symmetry) -> Self {
+        self.twins = symmetry.elements();
+        if self.twins.is_empty() {
+            self.twins.push(Pose::identity());
+        }
+        self
+    }
+
+    /// The twin of `pose` (the same view of a symmetric target) nearest `prior` in rotation.
+    fn twin_nearest(&self, pose: &Pose, prior: &Pose) -> Pose {
+        self.twins
+            .iter()
+            .map(|s| pose * s)
+            .min_by(|a, b| rotation_distance(a, prior).total_cmp(&rotation_distance(b, prior)))
+            .unwrap_or(*pose)
     }
 
     pub fn config(&self) -> &IcpConfig {
@@ -397,11 +423,16 @@ impl IcpTracker {
         let starts: Vec<Pose> = (cands.iter().map(|c| c.1))
             .chain(priors.iter().map(|p| rank(&dense, p, self.cfg.coarse_iters, 0.15 * d).1))
             .collect();
-        let checked: Vec<Scored> = if compare {
+        let mut checked: Vec<Scored> = if compare {
             self.compared(frame, pixels, &starts)
         } else {
             starts.iter().map(|p| self.full_check(frame, scene, p, Hidden::Miss, None)).collect()
         };
+        if let Some(p) = priors.first() {
+            for c in &mut checked {
+                c.fit.pose = self.twin_nearest(&c.fit.pose, p);
+            }
+        }
         let best = checked.iter().max_by(|a, b| a.score().total_cmp(&b.score())).copied();
         let Some(p) = priors.first() else {
             return best;
@@ -758,6 +789,9 @@ impl ScalableEstimator for IcpTracker {
         let poses = [&mut self.prev, &mut self.last_good, &mut self.velocity];
         for p in poses.into_iter().flatten() {
             p.translation.vector *= factor;
+        }
+        for s in &mut self.twins {
+            s.translation.vector *= factor;
         }
     }
 }

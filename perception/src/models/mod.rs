@@ -99,6 +99,12 @@ impl TargetModel {
         self.mesh.scaled(scale)
     }
 
+    /// The declared symmetry as the camera sees it in the lab: its point scaled as
+    /// [`Self::lab_mesh`] scales the mesh.
+    pub fn lab_symmetry(&self, scale: f64) -> Symmetry {
+        self.symmetry_group.clone().transformed([0.0; 3], scale)
+    }
+
     /// Greatest dimension in real metres.
     pub fn greatest_dimension_m(&self) -> f64 {
         self.mesh.greatest_dimension()

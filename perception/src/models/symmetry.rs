@@ -183,6 +183,12 @@ impl Symmetry {
         self.revolution.is_none().then_some(self.rotations.len())
     }
 
+    /// The finite part's elements as body-frame transforms, identity first: a pose `T` and
+    /// `T * S` show the same target (an axis of revolution's turns are not listed).
+    pub fn elements(&self) -> Vec<Isometry3<f64>> {
+        self.rotations.iter().map(|r| self.element(r)).collect()
+    }
+
     /// Element `r` of the finite part as a body-frame transform (turning about `point`).
     fn element(&self, r: &UnitQuaternion<f64>) -> Isometry3<f64> {
         let p = self.point.coords;
