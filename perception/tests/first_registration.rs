@@ -5,43 +5,16 @@
 //! mask, each registered from scratch against its known pose.
 #![allow(clippy::unwrap_used)]
 
-use hitl_perception::icp::{IcpConfig, IcpTracker};
-use hitl_perception::silhouette::SilhouetteRenderer;
-use hitl_perception::testing::render;
-use hitl_perception::tracker_bench::{fly_around_pose, paper_scale};
-use hitl_perception::{EstimateKind, PerceptionFrame, PoseEstimator, TargetModel};
-use hitl_sim_stub::camera::{DepthModel, NoiseModel, Preset, StereoDepth};
-use std::sync::Arc;
+#[path = "common/stereo_view.rs"]
+mod stereo_view;
 
-/// View `i` of a 41-capture fly-around of `target`, as the bench makes it: rendered in front of
-/// a wall at 0.6 m, Orbbec depth (seeded), the mask drawn with a 2-pixel margin.
-fn frame(target: &TargetModel, i: usize) -> (PerceptionFrame, hitl_hal::Pose) {
-    let k = Preset::Orbbec.at(320, 200);
-    let scale = paper_scale(10.0);
-    let mesh = target.lab_mesh(scale).unwrap();
-    let gt = fly_around_pose(i, 41, scale * 10.0);
-    let mut f = render(&mesh, &gt, &k, i as u64);
-    let depth = Arc::make_mut(&mut f.depth_m);
-    for z in depth.iter_mut().filter(|z| **z == 0.0) {
-        *z = 0.6;
-    }
-    let noise = NoiseModel {
-        depth_model: DepthModel::Orbbec(StereoDepth::GEMINI_305),
-        seed: 23,
-        ..Default::default()
-    };
-    noise.draw(i as u64).apply_depth(depth.as_mut_slice(), &k);
-    let mut mask = Vec::new();
-    SilhouetteRenderer::new(&mesh).unwrap().draw(&gt, &k, 2, &mut mask);
-    f.mask = Some(mask.into());
-    (f, gt)
-}
+use hitl_perception::icp::{IcpConfig, IcpTracker};
+use hitl_perception::{EstimateKind, PoseEstimator};
+use stereo_view::stereo_view;
 
 /// The registration's rotation error against the truth, degrees.
 fn registration_error(target: &str, view: usize) -> f64 {
-    let model = TargetModel::from_spec(target).unwrap();
-    let (f, gt) = frame(&model, view);
-    let mesh = model.lab_mesh(paper_scale(10.0)).unwrap();
+    let (f, gt, mesh) = stereo_view(target, view);
     let mut tracker = IcpTracker::new(&mesh, IcpConfig::default()).unwrap();
     let e = tracker.estimate(&f).unwrap();
     assert_eq!(e.kind, EstimateKind::Registered, "{target} view {view}");

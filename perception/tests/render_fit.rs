@@ -4,47 +4,20 @@
 //! fly-around at 320x200 through the Orbbec depth model, with the controller's drawn mask.
 #![allow(clippy::unwrap_used)]
 
+#[path = "common/stereo_view.rs"]
+mod stereo_view;
+
 use hitl_hal::Pose;
 use hitl_perception::icp::compare::Comparer;
 use hitl_perception::icp::fit::{fit, FitSteps};
-use hitl_perception::silhouette::SilhouetteRenderer;
-use hitl_perception::testing::render;
-use hitl_perception::tracker_bench::{fly_around_pose, paper_scale};
-use hitl_perception::{PerceptionFrame, TargetModel};
-use hitl_sim_stub::camera::{DepthModel, NoiseModel, Preset, StereoDepth};
 use nalgebra::{UnitQuaternion, Vector3};
-use std::sync::Arc;
+use stereo_view::stereo_view as frame;
 
 /// Depths beyond this are the wall behind the target (0.6 m), not the target.
 const FAR_M: f64 = 0.3;
 /// Depth tolerance of a pixel, about 2.5 sigma of the Orbbec model's error at this range (what
 /// the tracker derives from the frame).
 const TOL_M: f64 = 1e-3;
-
-/// View `i` of a 41-capture fly-around of `target`, the bench's way (as in
-/// tests/first_registration.rs); the lab mesh too.
-fn frame(target: &str, i: usize) -> (PerceptionFrame, Pose, hitl_perception::Mesh) {
-    let model = TargetModel::from_spec(target).unwrap();
-    let k = Preset::Orbbec.at(320, 200);
-    let scale = paper_scale(10.0);
-    let mesh = model.lab_mesh(scale).unwrap();
-    let gt = fly_around_pose(i, 41, scale * 10.0);
-    let mut f = render(&mesh, &gt, &k, i as u64);
-    let depth = Arc::make_mut(&mut f.depth_m);
-    for z in depth.iter_mut().filter(|z| **z == 0.0) {
-        *z = 0.6;
-    }
-    let noise = NoiseModel {
-        depth_model: DepthModel::Orbbec(StereoDepth::GEMINI_305),
-        seed: 23,
-        ..Default::default()
-    };
-    noise.draw(i as u64).apply_depth(depth.as_mut_slice(), &k);
-    let mut mask = Vec::new();
-    SilhouetteRenderer::new(&mesh).unwrap().draw(&gt, &k, 2, &mut mask);
-    f.mask = Some(mask.into());
-    (f, gt, mesh)
-}
 
 fn turned(p: &Pose, deg: f64) -> Pose {
     let axis = Vector3::new(0.3, -0.8, 0.5).normalize();
