@@ -1,8 +1,8 @@
 //! The ICP examples' shared knobs: `POLISH_POINTS`, `PIXEL_ITERS`, `TRACK_PIXEL_ITERS`,
-//! `SCREEN_FIT_ITERS`, `FIT_ITERS`, `TRACK_FIT_ITERS`, `COARSE_KEEP` and `POLISH_KEEP` override
-//! the registration's and tracking's refinement against the frame's pixels (docs/perception.md,
-//! "The first registration on every pixel" and "Render-and-compare fitting"), so a setting can be
-//! tried without a rebuild.
+//! `SCREEN_FIT_ITERS`, `FIT_ITERS`, `TRACK_FIT_ITERS`, `TRACK_FIT_MAX_PIXELS`, `COARSE_KEEP` and
+//! `POLISH_KEEP` override the registration's and tracking's refinement against the frame's pixels
+//! (docs/perception.md, "The first registration on every pixel" and "Render-and-compare
+//! fitting"), so a setting can be tried without a rebuild.
 
 use hitl_perception::icp::IcpConfig;
 
@@ -20,6 +20,7 @@ pub fn icp_config_from_env() -> IcpConfig {
     var("SCREEN_FIT_ITERS", &mut cfg.screen_fit_iters);
     var("FIT_ITERS", &mut cfg.fit_iters);
     var("TRACK_FIT_ITERS", &mut cfg.track_fit_iters);
+    var("TRACK_FIT_MAX_PIXELS", &mut cfg.track_fit_max_pixels);
     var("COARSE_KEEP", &mut cfg.coarse_keep);
     var("POLISH_KEEP", &mut cfg.polish_keep);
     cfg

@@ -239,6 +239,12 @@ impl Comparer {
         self.agreement_of(cost)
     }
 
+    /// The frame's target pixels (in the mask, with depth no farther than `far_m`), as the last
+    /// [`Self::prepare`] counted them.
+    pub fn target_pixels(&self) -> usize {
+        self.target_pixels
+    }
+
     /// The agreement of a pose whose [`Self::disagreement`] is `cost`.
     pub fn agreement_of(&self, cost: f64) -> f64 {
         if self.target_pixels == 0 {
