@@ -120,8 +120,8 @@ pub struct IcpConfig {
     pub fit_iters: u64,
     pub track_fit_iters: u64,
     /// Tracked frames whose target covers more pixels than this are not fitted: a view that
-    /// large pins the pose without it (RQ3 at 5 m: 0.07 deg mean e_r with ICP alone) and each
-    /// draw costs its area (a 5 m WFOV case at 1280x1024 played at 0.78x real time fitted).
+    /// large pins the pose without it (RQ3 at 5 m, 8 000-24 000 pixels: 0.07 deg mean e_r with
+    /// ICP alone) and each draw costs its area (those cases play at 0.7-1.4x real time fitted).
     pub track_fit_max_pixels: usize,
 }
 
