@@ -294,9 +294,6 @@ impl IcpTracker {
     /// other twin scored 180 deg for every frame after.
     pub fn with_symmetry(mut self, symmetry: &Symmetry) -> Self {
         self.twins = symmetry.elements();
-        if self.twins.is_empty() {
-            self.twins.push(Pose::identity());
-        }
         self
     }
 
@@ -522,14 +519,8 @@ impl IcpTracker {
             let pose = self.polish(frame, pixels, &start);
             let steps = FitSteps { iters: self.cfg.fit_iters, ..screen };
             let (pose, cost) = fit::fit(&mut self.comparer, frame, &pose, steps, tol, far);
-            let (inlier_frac, rms) = align::quality(&self.model, pixels, &pose, self.tol(), true);
-            let img = score::check(&self.model, frame, &pose, tol, Hidden::Miss, far);
-            out.push(Scored {
-                fit: Fit { pose, inlier_frac, rms },
-                silhouette: img.silhouette,
-                violation: img.violation,
-                agreement: Some(self.comparer.agreement_of(cost)),
-            });
+            let agreement = Some(self.comparer.agreement_of(cost));
+            out.push(self.scored_at(frame, pixels, pose, Hidden::Miss, agreement));
         }
         if debug() {
             debug_line!(
@@ -635,15 +626,28 @@ impl IcpTracker {
         if best.0 >= before || turn > MAX_TURN_PER_FRAME_RAD {
             return None;
         }
-        let pose = best.1;
-        let (inlier_frac, rms) = align::quality(&self.model, scene, &pose, self.tol(), true);
-        let img = score::check(&self.model, frame, &pose, self.pixel_tol(), Hidden::Skipped, far);
-        Some(Scored {
+        Some(self.scored_at(frame, scene, best.1, Hidden::Skipped, None))
+    }
+
+    /// `pose` as it stands, scored on `cloud` and the image without moving it (a pose a fit
+    /// against the frame's pixels settled on).
+    fn scored_at(
+        &self,
+        frame: &PerceptionFrame,
+        cloud: &[Vector3<f64>],
+        pose: Pose,
+        behind_others: Hidden,
+        agreement: Option<f64>,
+    ) -> Scored {
+        let (inlier_frac, rms) = align::quality(&self.model, cloud, &pose, self.tol(), true);
+        let img =
+            score::check(&self.model, frame, &pose, self.pixel_tol(), behind_others, self.far_m);
+        Scored {
             fit: Fit { pose, inlier_frac, rms },
             silhouette: img.silhouette,
             violation: img.violation,
-            agreement: None,
-        })
+            agreement,
+        }
     }
 
     /// `pose` moved so the model's camera-facing surface is centred on the scene point `at`.
