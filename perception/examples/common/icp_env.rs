@@ -1,6 +1,6 @@
 //! The ICP examples' shared knobs: `POLISH_POINTS`, `PIXEL_ITERS`, `TRACK_PIXEL_ITERS`,
-//! `SCREEN_FIT_ITERS`, `FIT_ITERS`, `TRACK_FIT_ITERS`, `TRACK_FIT_MAX_PIXELS`, `COARSE_KEEP` and
-//! `POLISH_KEEP` override the registration's and tracking's refinement against the frame's pixels
+//! `SCREEN_FIT_ITERS`, `FIT_ITERS`, `TRACK_FIT_ITERS`, `TRACK_FIT_MAX_PIXELS`, `COARSE_KEEP`,
+//! `POLISH_KEEP` and `MIN_TRACK_AGREEMENT` override the registration's and tracking's refinement against the frame's pixels
 //! (docs/perception.md, "The first registration on every pixel" and "Render-and-compare
 //! fitting"), so a setting can be tried without a rebuild.
 
@@ -23,5 +23,6 @@ pub fn icp_config_from_env() -> IcpConfig {
     var("TRACK_FIT_MAX_PIXELS", &mut cfg.track_fit_max_pixels);
     var("COARSE_KEEP", &mut cfg.coarse_keep);
     var("POLISH_KEEP", &mut cfg.polish_keep);
+    var("MIN_TRACK_AGREEMENT", &mut cfg.min_track_agreement);
     cfg
 }

@@ -25,6 +25,9 @@
 //!   with no track, a view must not be explained by hiding the part that tells look-alike poses
 //!   apart), or it sits in front of observed free space; then the tracker
 //!   re-registers on the same frame and reports `Lost` if that fails too.
+//! - A track that passes those checks but whose drawing disagrees with the frame's pixels
+//!   (`min_track_agreement`) may have slid onto a look-alike pose: the frame is registered again
+//!   with the track as the prior, and the better explanation of the frame is taken.
 //!
 //! Every threshold is relative to the model's size, so the tracker is scale-equivariant (the
 //! paper's depth normalisation changes nothing but rounding).
@@ -123,6 +126,11 @@ pub struct IcpConfig {
     /// large pins the pose without it (RQ3 at 5 m, 8 000-24 000 pixels: 0.07 deg mean e_r with
     /// ICP alone) and each draw costs its area (those cases play at 0.7-1.4x real time fitted).
     pub track_fit_max_pixels: usize,
+    /// A fitted track that agrees with the frame less than this ([`compare`]'s agreement, 1 -
+    /// disagreement per target pixel) is registered again, the track its prior, and the better
+    /// of the two taken; 0: never. A track on the target agrees 0.95-1.0; one sliding into a
+    /// look-alike pose 0.7-0.85 (RQ3's 50 m sat3, docs/perception.md).
+    pub min_track_agreement: f64,
 }
 
 impl Default for IcpConfig {
@@ -156,6 +164,7 @@ impl Default for IcpConfig {
             fit_iters: 300,
             track_fit_iters: 100,
             track_fit_max_pixels: 20_000,
+            min_track_agreement: 0.9,
         }
     }
 }
@@ -349,6 +358,15 @@ impl IcpTracker {
             self.far_m,
         );
         Scored { fit, silhouette: img.silhouette, violation: img.violation, agreement: None }
+    }
+
+    /// The target pixels registration's last stage refines on (up to `polish_points`; none
+    /// when that stage is off).
+    fn pixels(&self, frame: &PerceptionFrame) -> Vec<Vector3<f64>> {
+        match self.cfg.polish_points {
+            0 => Vec::new(),
+            n => cloud::scene(frame, n, self.model.diameter, &self.cfg.smoothing).points,
+        }
     }
 
     fn acceptable(&self, s: &Scored) -> bool {
@@ -572,23 +590,25 @@ impl IcpTracker {
     /// its `start` (on a stereo camera's depth the nearest-sample pairing biases a track as it
     /// does a registration, by degrees on a small view), `track_pixel_iters` pixel-wise steps
     /// ([`compare`]), then `track_fit_iters` of render-and-compare fitting ([`fit`]) from a small
-    /// simplex (a tracked pose is near), scored as a tracked fit is. `None` unless it explains
-    /// the frame better than the fit and turned less than a target turns between captures from
-    /// the start.
+    /// simplex (a tracked pose is near), scored as a tracked fit is. Taken where it explains the
+    /// frame better than the fit, turned less than a target turns between captures from the
+    /// start and passes the same acceptance; else `s`. Either way with its agreement with the
+    /// frame, where it was compared (not when fitting is off or the view is over
+    /// `track_fit_max_pixels`).
     fn track_refined(
         &mut self,
         frame: &PerceptionFrame,
         scene: &[Vector3<f64>],
         s: &Scored,
         start: &Pose,
-    ) -> Option<Scored> {
+    ) -> Scored {
         let (steps, fits) = (self.cfg.track_pixel_iters, self.cfg.track_fit_iters);
         if (steps == 0 && fits == 0) || self.cfg.polish_points == 0 {
-            return None;
+            return *s;
         }
         self.comparer.prepare(frame, self.far_m);
         if self.comparer.target_pixels() > self.cfg.track_fit_max_pixels {
-            return None;
+            return *s;
         }
         let (tol, far, d) = (self.pixel_tol(), self.far_m, self.model.diameter);
         let before = self.comparer.disagreement(frame, &s.fit.pose, tol, far);
@@ -618,15 +638,20 @@ impl IcpTracker {
         let turn = rotation_distance(&best.1, start);
         if debug() {
             debug_line!(
-                "icp track refined: disagreement {before:.1} (from start {at_start:.1}) -> {:.1} px, {:.2} deg from the fit",
+                "icp track refined: disagreement {before:.1} (from start {at_start:.1}) -> {:.1} of {} px, {:.2} deg from the fit",
                 best.0,
+                self.comparer.target_pixels(),
                 rotation_distance(&best.1, &s.fit.pose).to_degrees()
             );
         }
-        if best.0 >= before || turn > MAX_TURN_PER_FRAME_RAD {
-            return None;
+        if best.0 < before && turn <= MAX_TURN_PER_FRAME_RAD {
+            let agreement = Some(self.comparer.agreement_of(best.0));
+            let refined = self.scored_at(frame, scene, best.1, Hidden::Skipped, agreement);
+            if self.acceptable(&refined) {
+                return refined;
+            }
         }
-        Some(self.scored_at(frame, scene, best.1, Hidden::Skipped, None))
+        Scored { agreement: Some(self.comparer.agreement_of(before)), ..*s }
     }
 
     /// `pose` as it stands, scored on `cloud` and the image without moving it (a pose a fit
@@ -739,11 +764,28 @@ impl PoseEstimator for IcpTracker {
                 );
             }
             if self.acceptable(&s) && turn <= MAX_TURN_PER_FRAME_RAD {
-                // Refined against the frame's pixels where that explains them better and the
-                // refined pose passes the same acceptance.
-                let refined = self.track_refined(frame, &scene, &s, start);
-                let s = refined.filter(|r| self.acceptable(r)).unwrap_or(s);
-                return Ok(self.accept(&s, EstimateKind::Tracked));
+                // Refined against the frame's pixels where that explains them better.
+                let tracked = self.track_refined(frame, &scene, &s, start);
+                // A track the frame's pixels disagree with has slid off the target (ICP and
+                // the fit stay in the basin they start in): registered again, with the track
+                // as the prior, and whichever explains the frame better taken.
+                let doubtful = tracked.agreement.is_some_and(|a| a < self.cfg.min_track_agreement);
+                if doubtful {
+                    let priors = [tracked.fit.pose, self.placed(start, &at), *start];
+                    let pixels = self.pixels(frame);
+                    if let Some(r) = self.register(frame, &scene, &pixels, &priors) {
+                        if debug() {
+                            debug_line!(
+                                "icp track {} doubtful ({tracked}): registered {r}",
+                                frame.seq
+                            );
+                        }
+                        if self.acceptable(&r) && r.score() > tracked.score() {
+                            return Ok(self.accept(&r, EstimateKind::Registered));
+                        }
+                    }
+                }
+                return Ok(self.accept(&tracked, EstimateKind::Tracked));
             }
         }
         // Registration, its prior the track's prediction; without a track (reset, or lost) the
@@ -752,11 +794,7 @@ impl PoseEstimator for IcpTracker {
             Some(pred) => vec![self.placed(&pred, &at), pred],
             None => self.carried_on(&at).into_iter().collect(),
         };
-        // Registration's last stage refines on every target pixel (up to `polish_points`).
-        let pixels = match self.cfg.polish_points {
-            0 => Vec::new(),
-            n => cloud::scene(frame, n, self.model.diameter, &self.cfg.smoothing).points,
-        };
+        let pixels = self.pixels(frame);
         let reg = self.register(frame, &scene, &pixels, &priors);
         if debug() {
             if let Some(s) = &reg {

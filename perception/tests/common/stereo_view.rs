@@ -14,11 +14,18 @@ use std::sync::Arc;
 /// seeded), the controller's mask drawn with a 2-pixel margin. The frame, the true pose and the
 /// lab mesh.
 pub fn stereo_view(target: &str, i: usize) -> (PerceptionFrame, Pose, Mesh) {
+    let scale = paper_scale(10.0);
+    stereo_view_at(target, i, &fly_around_pose(i, 41, scale * 10.0))
+}
+
+/// [`stereo_view`] with the target at `gt` instead of the fly-around's pose `i` (`i` seeds the
+/// depth noise and numbers the frame).
+#[allow(dead_code)] // not every test binary that shares this file places the target itself
+pub fn stereo_view_at(target: &str, i: usize, gt: &Pose) -> (PerceptionFrame, Pose, Mesh) {
     let model = TargetModel::from_spec(target).unwrap();
     let k = Preset::Orbbec.at(320, 200);
-    let scale = paper_scale(10.0);
-    let mesh = model.lab_mesh(scale).unwrap();
-    let gt = fly_around_pose(i, 41, scale * 10.0);
+    let mesh = model.lab_mesh(paper_scale(10.0)).unwrap();
+    let gt = *gt;
     let mut f = render(&mesh, &gt, &k, i as u64);
     let depth = Arc::make_mut(&mut f.depth_m);
     for z in depth.iter_mut().filter(|z| **z == 0.0) {
