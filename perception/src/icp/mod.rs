@@ -129,7 +129,9 @@ pub struct IcpConfig {
     /// A fitted track that agrees with the frame less than this ([`compare`]'s agreement, 1 -
     /// disagreement per target pixel) is registered again, the track its prior, and the better
     /// of the two taken; 0: never. A track on the target agrees 0.95-1.0; one sliding into a
-    /// look-alike pose 0.30-0.72 (RQ3's 50 m sat3, docs/perception.md).
+    /// look-alike pose 0.30-0.72 (RQ3's 50 m sat3, docs/perception.md). On a stereo camera's
+    /// depth a track on the target agrees only 0.83-0.86, so nearly every frame is registered
+    /// again there (accurate, but a real-time worker then skips most captures: documented).
     pub min_track_agreement: f64,
 }
 
