@@ -1,8 +1,8 @@
 //! The ICP examples' shared knobs: `POLISH_POINTS`, `PIXEL_ITERS`, `TRACK_PIXEL_ITERS`,
 //! `SCREEN_FIT_ITERS`, `FIT_ITERS`, `TRACK_FIT_ITERS`, `TRACK_FIT_MAX_PIXELS`, `COARSE_KEEP`,
-//! `POLISH_KEEP` and `MIN_TRACK_AGREEMENT` override the registration's and tracking's refinement against the frame's pixels
-//! (docs/perception.md, "The first registration on every pixel" and "Render-and-compare
-//! fitting"), so a setting can be tried without a rebuild.
+//! `POLISH_KEEP` and `MIN_TRACK_AGREEMENT` override the registration's and tracking's
+//! refinement against the frame's pixels (docs/perception.md, "The first registration on every
+//! pixel" and "Render-and-compare fitting"), so a setting can be tried without a rebuild.
 
 use hitl_perception::icp::IcpConfig;
 
