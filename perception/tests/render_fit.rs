@@ -1,8 +1,8 @@
 //! Render-and-compare fitting (issue 23): the disagreement of a drawn pose with a stereo frame
 //! is least at the true pose, a part hidden behind something nearer costs nothing, the simplex
 //! brings a pose a few degrees off back to the truth, and a track the frame disagrees with is
-//! registered again. Frames of the tracker bench's 10 m
-//! fly-around at 320x200 through the Orbbec depth model, with the controller's drawn mask.
+//! registered again. Frames of the tracker bench's 10 m fly-around at 320x200 through the
+//! Orbbec depth model, with the controller's drawn mask.
 #![allow(clippy::unwrap_used)]
 
 #[path = "common/stereo_view.rs"]
