@@ -656,6 +656,38 @@ impl IcpTracker {
         Scored { agreement: Some(self.comparer.agreement_of(before)), ..*s }
     }
 
+    /// A tracked frame's answer: the track, unless its drawing disagrees with the frame (agreement
+    /// under `min_track_agreement`). Such a track has slid off the target (ICP and the fit stay
+    /// in the basin they start in), so the frame is registered again with the track and its
+    /// `start` as priors, and the registration taken if it explains the frame better.
+    fn checked(
+        &mut self,
+        frame: &PerceptionFrame,
+        scene: &[Vector3<f64>],
+        tracked: Scored,
+        start: &Pose,
+        at: &Vector3<f64>,
+    ) -> (Scored, EstimateKind) {
+        if !tracked.agreement.is_some_and(|a| a < self.cfg.min_track_agreement) {
+            return (tracked, EstimateKind::Tracked);
+        }
+        let priors = [tracked.fit.pose, self.placed(start, at), *start];
+        let pixels = self.pixels(frame);
+        match self.register(frame, scene, &pixels, &priors) {
+            Some(r) => {
+                if debug() {
+                    debug_line!("icp track {} doubtful ({tracked}): registered {r}", frame.seq);
+                }
+                if self.acceptable(&r) && r.score() > tracked.score() {
+                    (r, EstimateKind::Registered)
+                } else {
+                    (tracked, EstimateKind::Tracked)
+                }
+            }
+            None => (tracked, EstimateKind::Tracked),
+        }
+    }
+
     /// `pose` as it stands, scored on `cloud` and the image without moving it (a pose a fit
     /// against the frame's pixels settled on).
     fn scored_at(
@@ -768,26 +800,8 @@ impl PoseEstimator for IcpTracker {
             if self.acceptable(&s) && turn <= MAX_TURN_PER_FRAME_RAD {
                 // Refined against the frame's pixels where that explains them better.
                 let tracked = self.track_refined(frame, &scene, &s, start);
-                // A track the frame's pixels disagree with has slid off the target (ICP and
-                // the fit stay in the basin they start in): registered again, with the track
-                // as the prior, and whichever explains the frame better taken.
-                let doubtful = tracked.agreement.is_some_and(|a| a < self.cfg.min_track_agreement);
-                if doubtful {
-                    let priors = [tracked.fit.pose, self.placed(start, &at), *start];
-                    let pixels = self.pixels(frame);
-                    if let Some(r) = self.register(frame, &scene, &pixels, &priors) {
-                        if debug() {
-                            debug_line!(
-                                "icp track {} doubtful ({tracked}): registered {r}",
-                                frame.seq
-                            );
-                        }
-                        if self.acceptable(&r) && r.score() > tracked.score() {
-                            return Ok(self.accept(&r, EstimateKind::Registered));
-                        }
-                    }
-                }
-                return Ok(self.accept(&tracked, EstimateKind::Tracked));
+                let (s, kind) = self.checked(frame, &scene, tracked, start, &at);
+                return Ok(self.accept(&s, kind));
             }
         }
         // Registration, its prior the track's prediction; without a track (reset, or lost) the
