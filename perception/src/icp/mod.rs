@@ -127,11 +127,12 @@ pub struct IcpConfig {
     /// ICP alone) and each draw costs its area (those cases play at 0.7-1.4x real time fitted).
     pub track_fit_max_pixels: usize,
     /// A fitted track that agrees with the frame less than this ([`compare`]'s agreement, 1 -
-    /// disagreement per target pixel) is registered again, the track its prior, and the better
-    /// of the two taken; 0: never. A track on the target agrees 0.95-1.0; one sliding into a
-    /// look-alike pose 0.30-0.72 (RQ3's 50 m sat3, docs/perception.md). On a stereo camera's
-    /// depth a track on the target agrees only 0.83-0.86, so nearly every frame is registered
-    /// again there (accurate, but a real-time worker then skips most captures: documented).
+    /// disagreement per target pixel) less what the frame's depth noise costs a correct pose
+    /// ([`IcpTracker::noise_cost`]) is registered again, the track its prior, and the better of
+    /// the two taken; 0: never. On ideal depth a track on the target agrees 0.95-1.0, one
+    /// sliding into a look-alike pose 0.30-0.72 (RQ3's 50 m sat3, docs/perception.md). A stereo
+    /// camera's noise alone costs a pixel about (sigma / tol)^2 = 0.16: a track on the target
+    /// agrees 0.83-0.86 there, and a threshold blind to that registered nearly every frame.
     pub min_track_agreement: f64,
 }
 
@@ -330,6 +331,20 @@ impl IcpTracker {
     /// The tolerance of the image checks, which compare with single pixels' depths.
     fn pixel_tol(&self) -> f64 {
         self.tol().max(self.pixel_noise_tol)
+    }
+
+    /// What the frame's depth noise costs a correct pose's agreement ([`compare`]): each
+    /// target pixel's depth difference `d` costs `min((d / tol)^2, 1)`, so noise of standard
+    /// deviation `sigma` costs about `(sigma / tol)^2` (a little less: the cost is truncated at
+    /// 1). 0 on ideal depth, where the geometric tolerance dwarfs the noise.
+    fn noise_cost(&self) -> f64 {
+        let sigma = self.pixel_noise_tol / self.cfg.noise_sigmas.max(f64::MIN_POSITIVE);
+        let tol = self.pixel_tol();
+        if tol > 0.0 {
+            (sigma / tol).powi(2).min(1.0)
+        } else {
+            0.0
+        }
     }
 
     fn full_check(
@@ -657,9 +672,10 @@ impl IcpTracker {
     }
 
     /// A tracked frame's answer: the track, unless its drawing disagrees with the frame (agreement
-    /// under `min_track_agreement`). Such a track has slid off the target (ICP and the fit stay
-    /// in the basin they start in), so the frame is registered again with the track and its
-    /// `start` as priors, and the registration taken if it explains the frame better.
+    /// under `min_track_agreement` less the frame's [`Self::noise_cost`]). Such a track has slid
+    /// off the target (ICP and the fit stay in the basin they start in), so the frame is
+    /// registered again with the track and its `start` as priors, and the registration taken if
+    /// it explains the frame better.
     fn checked(
         &mut self,
         frame: &PerceptionFrame,
@@ -668,7 +684,8 @@ impl IcpTracker {
         start: &Pose,
         at: &Vector3<f64>,
     ) -> (Scored, EstimateKind) {
-        if !tracked.agreement.is_some_and(|a| a < self.cfg.min_track_agreement) {
+        let least = self.cfg.min_track_agreement - self.noise_cost();
+        if !tracked.agreement.is_some_and(|a| a < least) {
             return (tracked, EstimateKind::Tracked);
         }
         let priors = [tracked.fit.pose, self.placed(start, at), *start];
@@ -676,7 +693,10 @@ impl IcpTracker {
         match self.register(frame, scene, &pixels, &priors) {
             Some(r) => {
                 if debug() {
-                    debug_line!("icp track {} doubtful ({tracked}): registered {r}", frame.seq);
+                    debug_line!(
+                        "icp track {} doubtful ({tracked}, under {least:.3}): registered {r}",
+                        frame.seq
+                    );
                 }
                 if self.acceptable(&r) && r.score() > tracked.score() {
                     (r, EstimateKind::Registered)
