@@ -881,3 +881,29 @@ impl ScalableEstimator for IcpTracker {
         }
     }
 }
+
+#[cfg(test)]
+#[allow(clippy::unwrap_used)]
+mod tests {
+    use super::*;
+    use crate::TargetModel;
+
+    fn tracker() -> IcpTracker {
+        let mesh = TargetModel::from_spec("asymmetric").unwrap().lab_mesh(0.0077).unwrap();
+        IcpTracker::new(&mesh, IcpConfig::default()).unwrap()
+    }
+
+    #[test]
+    fn the_track_check_takes_off_what_the_noise_costs_a_correct_pose() {
+        let mut t = tracker();
+        // Ideal depth: nothing is taken off the check's 0.9.
+        assert_eq!(t.noise_cost(), 0.0);
+        // A stereo camera's noise, far above the model's sampling, sets the tolerance at 2.5
+        // sigma: a correct pose loses 1 / 6.25 of its agreement to it, and the check allows it.
+        t.pixel_noise_tol = t.cfg.noise_sigmas * 100.0 * t.tol();
+        assert!((t.noise_cost() - 0.16).abs() < 1e-9, "{}", t.noise_cost());
+        // Noise a tenth of the geometric tolerance costs (1/10)^2.
+        t.pixel_noise_tol = t.cfg.noise_sigmas * 0.1 * t.tol();
+        assert!((t.noise_cost() - 0.01).abs() < 1e-9, "{}", t.noise_cost());
+    }
+}
