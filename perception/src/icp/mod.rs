@@ -25,9 +25,10 @@
 //!   with no track, a view must not be explained by hiding the part that tells look-alike poses
 //!   apart), or it sits in front of observed free space; then the tracker
 //!   re-registers on the same frame and reports `Lost` if that fails too.
-//! - A track that passes those checks but whose drawing disagrees with the frame's pixels
-//!   (`min_track_agreement`) may have slid onto a look-alike pose: the frame is registered again
-//!   with the track as the prior, and the better explanation of the frame is taken.
+//! - A track that passes those checks but whose drawing disagrees with the frame's pixels more
+//!   than the frame's depth noise explains (`min_track_agreement`) may have slid onto a
+//!   look-alike pose: the frame is registered again with the track as the prior, and the better
+//!   explanation of the frame is taken.
 //!
 //! Every threshold is relative to the model's size, so the tracker is scale-equivariant (the
 //! paper's depth normalisation changes nothing but rounding).
