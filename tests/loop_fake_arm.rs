@@ -14,7 +14,10 @@ use hitl::rt::slot::LatestSlot;
 use hitl::telemetry::TripKind;
 use hitl::telemetry::{LoopStatus, NoTelemetry};
 use hitl_hal::JointState;
-use hitl_hal::{Arm, ArmState, Clock, ErrorKind, ErrorType, Joints, MonotonicClock};
+use hitl_hal::{
+    Arm, ArmState, CaptureRequest, Clock, ErrorKind, ErrorType, FireReport, Intrinsics, Joints,
+    Lifecycle, MonotonicClock, RgbdCamera, RgbdFrame, StreamConfig, Trigger, TriggerLines,
+};
 use std::alloc::{GlobalAlloc, Layout, System};
 use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
 use std::sync::Arc;
@@ -168,6 +171,19 @@ fn run_with(
     correction: CorrectionStage,
     feed: Option<(CorrectionQueues, Vec<CorrectionSegment>)>,
 ) -> Ran {
+    run_with_lines(program, script, operator_stop_at, correction, feed, NoCamera, NoTrigger)
+}
+
+/// [`run_with`] with the run's camera and trigger lines.
+fn run_with_lines<C: RgbdCamera + Lifecycle, G: Trigger + Lifecycle>(
+    program: &Program,
+    script: Script,
+    operator_stop_at: Option<u64>,
+    correction: CorrectionStage,
+    feed: Option<(CorrectionQueues, Vec<CorrectionSegment>)>,
+    camera: C,
+    trigger: G,
+) -> Ran {
     if let Some((queues, segments)) = feed {
         std::thread::spawn(move || {
             for seg in segments {
@@ -208,13 +224,7 @@ fn run_with(
             flag.store(true, Ordering::Relaxed);
         });
     }
-    let devices = Devices {
-        arm: &mut arm,
-        camera: NoCamera,
-        light: NoLight,
-        inputs: NoInputs,
-        trigger: NoTrigger,
-    };
+    let devices = Devices { arm: &mut arm, camera, light: NoLight, inputs: NoInputs, trigger };
     let io = LoopIo { reports, telemetry: NoTelemetry, status, health, stop, clock };
     let control = ControlLoop::new(program, devices, io, interlocks, RATE, &START)
         .with_correction(correction);
@@ -311,6 +321,83 @@ fn closed_loop_corrections_are_added_in_the_playback_without_allocating() {
     assert!((at(first + 35) - 0.004).abs() < 1e-12, "held");
     assert!((at(first + 50) - 0.002).abs() < 1e-12, "the second segment continues");
     assert_eq!(at(first + 100), 0.0, "after the last: the plan again");
+}
+
+/// What a capture tick asked of the camera and the trigger box, in order (atomics only: the
+/// tick's allocation count stays meaningful).
+#[derive(Default)]
+struct CaptureLog {
+    /// The tick the camera was last asked for, plus one (0: none yet).
+    asked: AtomicU64,
+    requests: AtomicU64,
+    pulses: AtomicU64,
+    /// Pulses fired before the camera had been asked for their tick.
+    early_pulses: AtomicU64,
+    /// The camera answers its `busy_request`-th request (1-based) busy.
+    busy_request: u64,
+}
+
+struct OrderCamera(Arc<CaptureLog>);
+impl ErrorType for OrderCamera {
+    type Error = ErrorKind;
+}
+impl Lifecycle for OrderCamera {}
+impl RgbdCamera for OrderCamera {
+    fn configure(&mut self, c: &StreamConfig) -> Result<Intrinsics, ErrorKind> {
+        Ok(c.intrinsics)
+    }
+    fn arm_trigger(&mut self) -> Result<(), ErrorKind> {
+        Ok(())
+    }
+    fn trigger(&mut self, request: CaptureRequest) -> Result<(), ErrorKind> {
+        let n = self.0.requests.fetch_add(1, Ordering::Relaxed) + 1;
+        if n == self.0.busy_request {
+            return Err(ErrorKind::Timeout);
+        }
+        self.0.asked.store(request.tick + 1, Ordering::Relaxed);
+        Ok(())
+    }
+    fn poll_frame(&mut self) -> Result<Option<RgbdFrame>, ErrorKind> {
+        Ok(None)
+    }
+}
+
+struct OrderTrigger(Arc<CaptureLog>);
+impl ErrorType for OrderTrigger {
+    type Error = ErrorKind;
+}
+impl Lifecycle for OrderTrigger {}
+impl Trigger for OrderTrigger {
+    fn fire(&mut self, tick: u64, _: TriggerLines) -> Result<(), ErrorKind> {
+        self.0.pulses.fetch_add(1, Ordering::Relaxed);
+        if self.0.asked.load(Ordering::Relaxed) != tick + 1 {
+            self.0.early_pulses.fetch_add(1, Ordering::Relaxed);
+        }
+        Ok(())
+    }
+    fn poll_fired(&mut self) -> Result<Option<FireReport>, ErrorKind> {
+        Ok(None)
+    }
+}
+
+/// A hardware-triggered frame can reach the camera's driver within microseconds of the pulse,
+/// and the driver drops a frame no request waits for: so the camera hears of each capture before
+/// the box pulses its line, and a capture the camera refuses as busy is not pulsed at all.
+#[test]
+fn the_camera_is_asked_before_the_box_pulses_and_a_busy_capture_is_not_pulsed() {
+    let _one = serial();
+    let p = program();
+    let captures = p.capture.iter().filter(|&&c| c).count() as u64;
+    let log = Arc::new(CaptureLog { busy_request: 2, ..CaptureLog::default() });
+    let (camera, trigger) = (OrderCamera(Arc::clone(&log)), OrderTrigger(Arc::clone(&log)));
+    let stage = CorrectionStage::open_loop();
+    let ran = run_with_lines(&p, Script::default(), None, stage, None, camera, trigger);
+    assert!(matches!(ran.outcome, Outcome::Completed { .. }), "{:?}", ran.outcome);
+    assert_eq!(captures, 5);
+    assert_eq!(log.requests.load(Ordering::Relaxed), captures);
+    assert_eq!(log.pulses.load(Ordering::Relaxed), captures - 1, "the busy capture is not pulsed");
+    assert_eq!(log.early_pulses.load(Ordering::Relaxed), 0, "a pulse came before its request");
+    assert_eq!(ran.allocations, 0, "the capture ticks allocated");
 }
 
 #[test]

@@ -483,13 +483,13 @@ where
         if !p.capture.get(i as usize).copied().unwrap_or(false) {
             return;
         }
-        let lines = TriggerLines { camera: true, light: false };
-        if self.devices.trigger.fire(k, lines).is_err() {
-            self.device_failed.get_or_insert(Device::Trigger);
-        }
+        // The camera hears of the request before the box pulses its line: a hardware-triggered
+        // frame can reach the camera's driver within microseconds of the pulse, and a frame with
+        // no request waiting is dropped as stale.
         match self.devices.camera.trigger(CaptureRequest { tick: k, fired_ns: now }) {
             Ok(()) => {}
-            // Busy: this capture is lost (and recorded as such); the camera still works.
+            // Busy: this capture is lost (and recorded as such), and not pulsed; the camera
+            // still works.
             Err(e) if e.kind() == ErrorKind::Timeout => {
                 self.telemetry.capture_missed(k, now);
                 return;
@@ -497,6 +497,10 @@ where
             Err(_) => {
                 self.device_failed.get_or_insert(Device::Camera);
             }
+        }
+        let lines = TriggerLines { camera: true, light: false };
+        if self.devices.trigger.fire(k, lines).is_err() {
+            self.device_failed.get_or_insert(Device::Trigger);
         }
         self.telemetry.capture(&CaptureOut {
             tick: k,

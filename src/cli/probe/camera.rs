@@ -167,8 +167,10 @@ fn fire_and_count(
     for i in 0..u64::from(n) {
         let start = Instant::now();
         let now = clock.now_ns();
-        tb.fire(i, CAMERA).map_err(|e| format!("trigger box on {port}: fire {i}: {e}"))?;
+        // The request first: the pulse's frame can reach the driver before this thread runs
+        // again, and a frame no request waits for is dropped as stale.
         cam.trigger(CaptureRequest { tick: i, fired_ns: now }).map_err(|e| e.to_string())?;
+        tb.fire(i, CAMERA).map_err(|e| format!("trigger box on {port}: fire {i}: {e}"))?;
         while start.elapsed() < PULSE_PERIOD {
             poll(cam, tb, &mut frames);
             std::thread::sleep(Duration::from_millis(1));
