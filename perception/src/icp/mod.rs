@@ -24,7 +24,9 @@
 //!   leaves the silhouette (registration counts parts hidden behind another object as outside:
 //!   with no track, a view must not be explained by hiding the part that tells look-alike poses
 //!   apart), or it sits in front of observed free space; then the tracker
-//!   re-registers on the same frame and reports `Lost` if that fails too.
+//!   re-registers on the same frame and reports `Lost` if that fails too. A registration
+//!   refused only for what another object hides is taken where it continues the track (within a
+//!   capture's largest turn of its prediction): that is no look-alike.
 //! - A track that passes those checks but whose drawing disagrees with the frame's pixels more
 //!   than the frame's depth noise explains (`min_track_agreement`) may have slid onto a
 //!   look-alike pose: the frame is registered again with the track as the prior, and the better
@@ -709,6 +711,30 @@ impl IcpTracker {
         }
     }
 
+    /// A registration refused for the silhouette, taken after all where it continues the track:
+    /// within a capture's largest turn of the track's `prior`, it is no look-alike of the
+    /// target, so model parts something else (the stand) visibly hides are not held against it,
+    /// as they are not against a tracked pose ([`Hidden::Skipped`]). Without a track, hiding
+    /// such parts could explain a view by the part that tells look-alike poses apart.
+    fn hidden_near_track(
+        &self,
+        frame: &PerceptionFrame,
+        scene: &[Vector3<f64>],
+        refused: &Scored,
+        prior: Option<&Pose>,
+    ) -> Option<Scored> {
+        let prior = prior?;
+        if rotation_distance(&refused.fit.pose, prior) > MAX_TURN_PER_FRAME_RAD {
+            return None;
+        }
+        let pose = refused.fit.pose;
+        let s = self.scored_at(frame, scene, pose, Hidden::Skipped, refused.agreement);
+        if debug() {
+            debug_line!("icp registration near the track, hidden parts skipped: {s}");
+        }
+        self.acceptable(&s).then_some(s)
+    }
+
     /// `pose` as it stands, scored on `cloud` and the image without moving it (a pose a fit
     /// against the frame's pixels settled on).
     fn scored_at(
@@ -849,7 +875,11 @@ impl PoseEstimator for IcpTracker {
         }
         match reg {
             Some(s) if self.acceptable(&s) => Ok(self.accept(&s, EstimateKind::Registered)),
-            _ => Ok(self.lose()),
+            Some(s) => match self.hidden_near_track(frame, &scene, &s, priors.first()) {
+                Some(s) => Ok(self.accept(&s, EstimateKind::Registered)),
+                None => Ok(self.lose()),
+            },
+            None => Ok(self.lose()),
         }
     }
 

@@ -20,7 +20,10 @@ pub enum Hidden {
     /// would tell it apart).
     Miss,
     /// Not judged. For tracking, whose prediction already says where the target is: a part
-    /// behind the stand is no evidence against it.
+    /// behind the stand is no evidence against it. Off the mask, a sample counts as hidden
+    /// where its neighbourhood shows something nearer or no depth at all (a stereo camera
+    /// has none on the stand's thin legs and in their projector shadow); the comparison with
+    /// the frame's pixels ([`super::compare`]) still holds such pixels against the pose.
     Skipped,
 }
 
@@ -100,7 +103,10 @@ pub fn check_strided(
                         } else if !has_depth {
                             depth_missing = true;
                         }
-                    } else if !(has_depth && d < q.z - tol) {
+                    } else if has_depth && d >= q.z - tol {
+                        // Off the mask, something at or behind the sample: it is not hidden.
+                        // Where the frame has no depth at all it may be (a stereo camera sees
+                        // none on the stand's thin legs nor in the shadow they cast).
                         hidden = false;
                     }
                 }
