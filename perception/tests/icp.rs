@@ -202,10 +202,15 @@ fn hide_lower_part(frame: &mut PerceptionFrame, fraction: f64, depth_m: f32) {
     std::sync::Arc::make_mut(&mut frame.depth_m)[hidden].fill(depth_m);
 }
 
-#[test]
-fn keeps_tracking_while_another_object_hides_part_of_the_target() {
-    // From below, the stand hides the lower part of the target. Model samples behind it are no
-    // evidence against a pose (counting them as off-silhouette failed every such frame).
+/// `frames` frames of a slowly turning asymmetric target, out of view at frame `gone` (if any),
+/// the stand (`hide_lower_part`, at `stand_depth_m`; 0: no depth) in front of its lower part
+/// from frame `stand_from` on: each frame's kind and the run's metrics.
+fn track_behind_the_stand(
+    frames: u64,
+    gone: Option<u64>,
+    stand_from: u64,
+    stand_depth_m: f32,
+) -> (Vec<EstimateKind>, hitl_perception::Metrics) {
     let k = intrinsics_hfov(160, 128, 36.5);
     let model = TargetModel::from_spec("asymmetric").unwrap();
     let scale = 0.1;
@@ -213,19 +218,27 @@ fn keeps_tracking_while_another_object_hides_part_of_the_target() {
     let mut t = IcpTracker::new(&mesh, IcpConfig::default()).unwrap();
     let mut pairs = Vec::new();
     let mut kinds = Vec::new();
-    for i in 0..8u64 {
+    for i in 0..frames {
         let a = i as f64 * 0.05;
         let gt = look_pose(1.2, 0.4 + a, -0.3, 0.9 + a);
-        let mut frame = render(&mesh, &gt, &k, i);
-        if i >= 2 {
-            hide_lower_part(&mut frame, 0.6, 0.9);
+        let shown = if gone == Some(i) { look_pose(-1.0, 0.0, 0.0, 0.0) } else { gt };
+        let mut frame = render(&mesh, &shown, &k, i);
+        if i >= stand_from {
+            hide_lower_part(&mut frame, 0.6, stand_depth_m);
         }
         let e = t.estimate(&frame).unwrap();
         kinds.push(e.kind);
         pairs.push(PosePair { timestamp_ns: i, gt, est: e.pose });
     }
+    (kinds, evaluate(&pairs, scale).unwrap())
+}
+
+#[test]
+fn keeps_tracking_while_another_object_hides_part_of_the_target() {
+    // From below, the stand hides the lower part of the target. Model samples behind it are no
+    // evidence against a pose (counting them as off-silhouette failed every such frame).
+    let (kinds, m) = track_behind_the_stand(8, None, 2, 0.9);
     assert!(kinds[1..].iter().all(|k| *k == EstimateKind::Tracked), "{kinds:?}");
-    let m = evaluate(&pairs, scale).unwrap();
     assert_eq!(m.failures, 0);
     assert!(m.mean_er_deg < 0.5, "mean e_r {}", m.mean_er_deg);
 }
@@ -235,26 +248,8 @@ fn keeps_tracking_while_a_stand_without_depth_hides_part_of_the_target() {
     // A stereo camera sees no depth on the stand's thin legs nor in the shadow they cast: off
     // the mask and without depth, a model sample may be hidden, so it is no evidence against a
     // track either (counted as a miss, every such frame failed the silhouette check).
-    let k = intrinsics_hfov(160, 128, 36.5);
-    let model = TargetModel::from_spec("asymmetric").unwrap();
-    let scale = 0.1;
-    let mesh = model.lab_mesh(scale).unwrap();
-    let mut t = IcpTracker::new(&mesh, IcpConfig::default()).unwrap();
-    let mut pairs = Vec::new();
-    let mut kinds = Vec::new();
-    for i in 0..8u64 {
-        let a = i as f64 * 0.05;
-        let gt = look_pose(1.2, 0.4 + a, -0.3, 0.9 + a);
-        let mut frame = render(&mesh, &gt, &k, i);
-        if i >= 2 {
-            hide_lower_part(&mut frame, 0.6, 0.0);
-        }
-        let e = t.estimate(&frame).unwrap();
-        kinds.push(e.kind);
-        pairs.push(PosePair { timestamp_ns: i, gt, est: e.pose });
-    }
+    let (kinds, m) = track_behind_the_stand(8, None, 2, 0.0);
     assert!(kinds[1..].iter().all(|k| *k == EstimateKind::Tracked), "{kinds:?}");
-    let m = evaluate(&pairs, scale).unwrap();
     assert_eq!(m.failures, 0);
     assert!(m.mean_er_deg < 0.5, "mean e_r {}", m.mean_er_deg);
 }
@@ -265,28 +260,9 @@ fn after_a_loss_a_registration_near_the_track_may_have_the_stand_hide_part_of_it
     // part. With no track, registration holds hidden parts against a pose (a look-alike could
     // hide what tells it apart); one that continues the lost track's motion is no look-alike,
     // and is taken with the hidden parts left unjudged, as a tracked pose would be.
-    let k = intrinsics_hfov(160, 128, 36.5);
-    let model = TargetModel::from_spec("asymmetric").unwrap();
-    let scale = 0.1;
-    let mesh = model.lab_mesh(scale).unwrap();
-    let mut t = IcpTracker::new(&mesh, IcpConfig::default()).unwrap();
-    let mut pairs = Vec::new();
-    let mut kinds = Vec::new();
-    for i in 0..7u64 {
-        let a = i as f64 * 0.05;
-        let gt = look_pose(1.2, 0.4 + a, -0.3, 0.9 + a);
-        let shown = if i == 3 { look_pose(-1.0, 0.0, 0.0, 0.0) } else { gt };
-        let mut frame = render(&mesh, &shown, &k, i);
-        if i >= 4 {
-            hide_lower_part(&mut frame, 0.6, 0.9);
-        }
-        let e = t.estimate(&frame).unwrap();
-        kinds.push(e.kind);
-        pairs.push(PosePair { timestamp_ns: i, gt, est: e.pose });
-    }
+    let (kinds, m) = track_behind_the_stand(7, Some(3), 4, 0.9);
     assert_eq!(kinds[3], EstimateKind::Lost, "{kinds:?}");
     assert_eq!(kinds[4], EstimateKind::Registered, "{kinds:?}");
-    let m = evaluate(&pairs, scale).unwrap();
     assert_eq!(m.failures, 1, "{kinds:?}");
     assert!(m.mean_er_deg < 0.5, "mean e_r {}", m.mean_er_deg);
 }
