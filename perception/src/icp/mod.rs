@@ -873,14 +873,15 @@ impl PoseEstimator for IcpTracker {
                 );
             }
         }
-        match reg {
-            Some(s) if self.acceptable(&s) => Ok(self.accept(&s, EstimateKind::Registered)),
-            Some(s) => match self.hidden_near_track(frame, &scene, &s, priors.first()) {
-                Some(s) => Ok(self.accept(&s, EstimateKind::Registered)),
-                None => Ok(self.lose()),
-            },
-            None => Ok(self.lose()),
-        }
+        let taken = match reg {
+            Some(s) if self.acceptable(&s) => Some(s),
+            Some(s) => self.hidden_near_track(frame, &scene, &s, priors.first()),
+            None => None,
+        };
+        Ok(match taken {
+            Some(s) => self.accept(&s, EstimateKind::Registered),
+            None => self.lose(),
+        })
     }
 
     fn reset(&mut self) {
