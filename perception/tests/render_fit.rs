@@ -11,6 +11,7 @@ mod stereo_view;
 use hitl_hal::Pose;
 use hitl_perception::icp::compare::Comparer;
 use hitl_perception::icp::fit::{fit, FitSteps};
+use hitl_perception::icp::score::Hidden;
 use hitl_perception::icp::{IcpConfig, IcpTracker};
 use hitl_perception::{EstimateKind, PoseEstimator};
 use nalgebra::{UnitQuaternion, Vector3};
@@ -32,7 +33,7 @@ fn turned(p: &Pose, deg: f64) -> Pose {
 fn the_true_pose_disagrees_least_with_the_frame() {
     let (f, gt, mesh) = frame("asymmetric", 40);
     let mut c = Comparer::new(&mesh).unwrap();
-    c.prepare(&f, FAR_M);
+    c.prepare(&f, FAR_M, Hidden::Miss);
     let at_truth = c.disagreement(&f, &gt, TOL_M, FAR_M);
     let mut last = at_truth;
     for deg in [1.0, 3.0, 10.0] {
@@ -48,7 +49,7 @@ fn the_true_pose_disagrees_least_with_the_frame() {
 fn a_part_hidden_behind_something_nearer_is_no_evidence_against_the_pose() {
     let (mut f, gt, mesh) = frame("asymmetric", 40);
     let mut c = Comparer::new(&mesh).unwrap();
-    c.prepare(&f, FAR_M);
+    c.prepare(&f, FAR_M, Hidden::Miss);
     let clear = c.disagreement(&f, &gt, TOL_M, FAR_M);
     // A bar in front of the target's lower rows: the mask loses them (as the controller's
     // drawing with the stand as occluder does), the depth sees the bar, nearer.
@@ -72,7 +73,7 @@ fn a_part_hidden_behind_something_nearer_is_no_evidence_against_the_pose() {
     }
     f.depth_m = depth.into();
     f.mask = Some(m.into());
-    c.prepare(&f, FAR_M);
+    c.prepare(&f, FAR_M, Hidden::Miss);
     let occluded = c.disagreement(&f, &gt, TOL_M, FAR_M);
     assert!(hidden > 20, "the bar hides {hidden} mask pixels");
     // The hidden pixels cost nothing; the rest of the target is judged as before.
@@ -83,7 +84,7 @@ fn a_part_hidden_behind_something_nearer_is_no_evidence_against_the_pose() {
         *z = 0.6;
     }
     f.depth_m = far.into();
-    c.prepare(&f, FAR_M);
+    c.prepare(&f, FAR_M, Hidden::Miss);
     let cut = c.disagreement(&f, &gt, TOL_M, FAR_M);
     assert!(cut > occluded + 0.5 * hidden as f64, "{cut:.1} px cut off, {occluded:.1} hidden");
 }
@@ -93,7 +94,7 @@ fn the_simplex_brings_a_pose_a_few_degrees_off_back_to_the_truth() {
     for (target, view) in [("asymmetric", 40), ("one-plane", 40), ("two-planes", 20)] {
         let (f, gt, mesh) = frame(target, view);
         let mut c = Comparer::new(&mesh).unwrap();
-        c.prepare(&f, FAR_M);
+        c.prepare(&f, FAR_M, Hidden::Miss);
         let start = turned(&gt, 3.0);
         let d = mesh.greatest_dimension();
         let steps = FitSteps { turn_rad: 2f64.to_radians(), shift_m: 0.01 * d, iters: 300 };

@@ -17,6 +17,7 @@
 //! (turned about an axis that is no symmetry of the target) passes them.
 
 use super::align::Steps;
+use super::score::Hidden;
 use crate::models::mesh::triangle_cross;
 use crate::models::Mesh;
 use crate::silhouette::{SilhouetteRenderer, TARGET};
@@ -43,6 +44,8 @@ pub struct Comparer {
     target_box: Option<[usize; 4]>,
     /// How many target pixels the frame has ([`Self::prepare`]): the agreement's unit.
     target_pixels: usize,
+    /// What a drawn pixel off the mask where the frame has no depth costs ([`Self::prepare`]).
+    unseen_off_mask: Hidden,
     /// The tracker's model scale over the drawn mesh's.
     pub scale: f64,
 }
@@ -66,6 +69,7 @@ impl Comparer {
             residuals: Vec::new(),
             target_box: None,
             target_pixels: 0,
+            unseen_off_mask: Hidden::Miss,
             scale: 1.0,
         })
     }
@@ -80,7 +84,10 @@ impl Comparer {
 
     /// The box of the frame's target pixels (in the mask, with depth no farther than `far_m`),
     /// pixels (u0, v0, u1, v1 inclusive), and their count; set before comparing on a frame.
-    pub fn prepare(&mut self, frame: &PerceptionFrame, far_m: f64) {
+    /// `unseen_off_mask`: what a drawn pixel off the mask where the frame has no depth costs
+    /// ([`Self::disagreement`]).
+    pub fn prepare(&mut self, frame: &PerceptionFrame, far_m: f64, unseen_off_mask: Hidden) {
+        self.unseen_off_mask = unseen_off_mask;
         let w = frame.intrinsics.width as usize;
         let mut bx: Option<[usize; 4]> = None;
         self.target_pixels = 0;
@@ -193,7 +200,11 @@ impl Comparer {
     /// nearer) costs what a silhouette miss does. Costing nothing: a target pixel without depth
     /// (a stereo camera has none at edges and in shadows), and a drawn pixel outside the mask
     /// where the frame sees something nearer than the drawing (the stand in front of the
-    /// target: what it hides is no evidence against the pose).
+    /// target: what it hides is no evidence against the pose). A drawn pixel outside the mask
+    /// where the frame has no depth costs 1 when [`Self::prepare`] was told [`Hidden::Miss`]
+    /// (registration: the outline is most of what a small view says), nothing with
+    /// [`Hidden::Skipped`] (tracking: a stereo camera sees no depth on the stand's thin legs
+    /// nor in the shadow they cast, and a track already says where the target is).
     pub fn disagreement(
         &mut self,
         frame: &PerceptionFrame,
@@ -220,7 +231,12 @@ impl Comparer {
                     cost += 1.0;
                 }
             } else if !in_mask {
-                if !(has_depth && observed < self.drawn_depth(i) - tol) {
+                let hidden = if has_depth {
+                    observed < self.drawn_depth(i) - tol
+                } else {
+                    self.unseen_off_mask == Hidden::Skipped
+                };
+                if !hidden {
                     cost += 1.0;
                 }
             } else if has_depth {

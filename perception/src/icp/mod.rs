@@ -527,7 +527,7 @@ impl IcpTracker {
         pixels: &[Vector3<f64>],
         starts: &[Pose],
     ) -> Vec<Scored> {
-        self.comparer.prepare(frame, self.far_m);
+        self.comparer.prepare(frame, self.far_m, Hidden::Miss);
         let t0 = std::time::Instant::now();
         let (tol, far, d) = (self.pixel_tol(), self.far_m, self.model.diameter);
         let screen = FitSteps { turn_rad: FIT_TURN_RAD, shift_m: FIT_SHIFT * d, iters: 0 };
@@ -610,11 +610,12 @@ impl IcpTracker {
     /// its `start` (on a stereo camera's depth the nearest-sample pairing biases a track as it
     /// does a registration, by degrees on a small view), `track_pixel_iters` pixel-wise steps
     /// ([`compare`]), then `track_fit_iters` of render-and-compare fitting ([`fit`]) from a small
-    /// simplex (a tracked pose is near), scored as a tracked fit is. Taken where it explains the
-    /// frame better than the fit, turned less than a target turns between captures from the
-    /// start and passes the same acceptance; else `s`. Either way with its agreement with the
-    /// frame, where it was compared (not when fitting is off or the view is over
-    /// `track_fit_max_pixels`).
+    /// simplex (a tracked pose is near), scored as a tracked fit is: drawn pixels where the frame
+    /// has no depth off the mask are not held against it ([`Hidden::Skipped`]). Taken where it
+    /// explains the frame better than the fit, turned less than a target turns between captures
+    /// from the start and passes the acceptance (`s` itself may not have); else `s`. Either way
+    /// with its agreement with the frame, where it was compared (not when fitting is off or the
+    /// view is over `track_fit_max_pixels`).
     fn track_refined(
         &mut self,
         frame: &PerceptionFrame,
@@ -626,7 +627,7 @@ impl IcpTracker {
         if (steps == 0 && fits == 0) || self.cfg.polish_points == 0 {
             return *s;
         }
-        self.comparer.prepare(frame, self.far_m);
+        self.comparer.prepare(frame, self.far_m, Hidden::Skipped);
         if self.comparer.target_pixels() > self.cfg.track_fit_max_pixels {
             return *s;
         }
@@ -844,9 +845,14 @@ impl PoseEstimator for IcpTracker {
                     turn.to_degrees()
                 );
             }
-            if self.acceptable(&s) && turn <= MAX_TURN_PER_FRAME_RAD {
-                // Refined against the frame's pixels where that explains them better.
-                let tracked = self.track_refined(frame, &scene, &s, start);
+            if turn > MAX_TURN_PER_FRAME_RAD {
+                continue;
+            }
+            // Refined against the frame's pixels where that explains them better, and judged
+            // after: on the few hundred noisy pixels the stand leaves, ICP's nearest-sample
+            // pairing can end a fit just outside the checks that the pixels' fit passes.
+            let tracked = self.track_refined(frame, &scene, &s, start);
+            if self.acceptable(&tracked) {
                 let (s, kind) = self.checked(frame, &scene, tracked, start, &at);
                 return Ok(self.accept(&s, kind));
             }
