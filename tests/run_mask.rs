@@ -11,7 +11,7 @@
 use hitl_record::reader::read_recording;
 
 mod common;
-use common::hitl;
+use common::{hitl, num, plan_flyaround, text};
 
 const TRUE_LAB: &str = concat!(env!("CARGO_MANIFEST_DIR"), "/calib/tests/data/true-lab.toml");
 const CALIBRATED: &str = concat!(env!("CARGO_MANIFEST_DIR"), "/tests/data/calibrated-lab.toml");
@@ -98,10 +98,10 @@ fn coverage_pct(out: &str) -> f64 {
     figure(out, "covers mean ")
 }
 
-/// `hitl run` with the controller's lab equal to the stub's (no `--stub-config`), the Orbbec
-/// preset at its 1280x800, rendered masks with `margin` pixels; its stdout and stderr.
-fn run_equal_lab(traj: &str, margin: &str, record: &str) -> (Option<i32>, String) {
-    let run = hitl(&[
+/// `hitl run` on the simulated clock with the Orbbec preset at its 1280x800, the simulated
+/// light, drawn masks and the Orbbec depth model, then `extra`; its exit code, stdout and stderr.
+fn run_orbbec(traj: &str, record: &str, extra: &[&str]) -> (Option<i32>, String) {
+    let mut args = vec![
         "run",
         traj,
         "--record",
@@ -119,18 +119,22 @@ fn run_equal_lab(traj: &str, margin: &str, record: &str) -> (Option<i32>, String
         "sim",
         "--mask",
         "rendered",
-        "--mask-margin-px",
-        margin,
         "--depth-model",
         "orbbec",
-        "--perception",
-        "none",
-        "--config",
-        TRUE_LAB,
-    ]);
-    let out =
-        format!("{}{}", String::from_utf8_lossy(&run.stdout), String::from_utf8_lossy(&run.stderr));
-    (run.status.code(), out)
+    ];
+    args.extend_from_slice(extra);
+    let run = hitl(&args);
+    (run.status.code(), text(&run))
+}
+
+/// [`run_orbbec`] with the controller's lab equal to the stub's (no `--stub-config`), rendered
+/// masks with `margin` pixels, no estimator.
+fn run_equal_lab(traj: &str, margin: &str, record: &str) -> (Option<i32>, String) {
+    run_orbbec(
+        traj,
+        record,
+        &["--mask-margin-px", margin, "--perception", "none", "--config", TRUE_LAB],
+    )
 }
 
 #[test]
@@ -211,56 +215,19 @@ fn on_the_real_path_the_track_holds_sat2_through_the_frames_the_stand_hides() {
     // start that its first fit leaves just outside the checks is refined before it is judged.
     // Without either, that frame was lost (and with the first alone, two-planes slid 45 deg).
     let dir = tempfile::tempdir().expect("tempdir");
-    let traj = dir.path().join("flyaround.npz").to_str().expect("utf-8").to_string();
-    let plan = hitl(&[
-        "plan",
-        "--preset",
-        "flyaround",
-        "--range-m",
-        "10",
-        "--duration-s",
-        "20",
-        "--capture-every",
-        "5",
-        "--out",
-        &traj,
-    ]);
-    assert_eq!(plan.status.code(), Some(0), "{}", String::from_utf8_lossy(&plan.stderr));
+    let traj = dir.path().join("flyaround.npz");
+    plan_flyaround(&traj, "10", "5");
+    let traj = traj.to_str().expect("utf-8").to_string();
     let rec = dir.path().join("sat2.mcap").to_str().expect("utf-8").to_string();
-    let run = hitl(&[
-        "run",
-        &traj,
-        "--record",
-        &rec,
-        "--camera",
-        "sim",
-        "--camera-preset",
-        "orbbec",
-        "--camera-size",
-        "1280x800",
-        "--light",
-        "sim",
-        "--perception",
-        "icp",
-        "--mask",
-        "rendered",
-        "--depth-model",
-        "orbbec",
-        "--target-model",
-        "sat2-one-plane",
-        "--clock",
-        "sim",
-        "--plain",
-    ]);
-    let out =
-        format!("{}{}", String::from_utf8_lossy(&run.stdout), String::from_utf8_lossy(&run.stderr));
-    assert!(matches!(run.status.code(), Some(0 | 4)), "{out}");
+    let (code, out) =
+        run_orbbec(&traj, &rec, &["--perception", "icp", "--target-model", "sat2-one-plane"]);
+    assert!(matches!(code, Some(0 | 4)), "{out}");
     let eval = hitl(&["eval", &rec, "--json"]);
     assert_eq!(eval.status.code(), Some(0), "{}", String::from_utf8_lossy(&eval.stderr));
     let m: serde_json::Value = serde_json::from_slice(&eval.stdout).expect("eval's JSON");
     assert_eq!(m["frames"], 41, "{m}");
     assert_eq!(m["failures"], 0, "{m}");
     // Its first view (end on, ~250 depth pixels) sets the figure: 8.0 deg, 7.05 before.
-    let er = m["mean_er_deg"].as_f64().expect("mean e_r");
+    let er = num(&m, "mean_er_deg");
     assert!(er < 10.0, "mean e_r {er}: {m}");
 }
