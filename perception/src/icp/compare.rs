@@ -87,7 +87,6 @@ impl Comparer {
     /// `unseen_off_mask`: what a drawn pixel off the mask where the frame has no depth costs
     /// ([`Self::disagreement`]).
     pub fn prepare(&mut self, frame: &PerceptionFrame, far_m: f64, unseen_off_mask: Hidden) {
-        self.unseen_off_mask = unseen_off_mask;
         let w = frame.intrinsics.width as usize;
         let mut bx: Option<[usize; 4]> = None;
         self.target_pixels = 0;
@@ -103,6 +102,7 @@ impl Comparer {
             });
         }
         self.target_box = bx;
+        self.unseen_off_mask = unseen_off_mask;
     }
 
     /// The drawn surface's depth at pixel `i`, metres (infinite off the drawing).

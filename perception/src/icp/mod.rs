@@ -263,6 +263,12 @@ impl Scored {
     }
 }
 
+/// Whether a fit's drawing explains the frame no better than drawing nothing (agreement at or
+/// below 0; not when it was not compared): it has left the target.
+fn explains_nothing(s: &Scored) -> bool {
+    s.agreement.is_some_and(|a| a <= 0.0)
+}
+
 /// `HITL_ICP_DEBUG`'s line for a candidate: its score and the four terms it is the product of.
 impl std::fmt::Display for Scored {
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
@@ -675,11 +681,20 @@ impl IcpTracker {
         Scored { agreement: Some(self.comparer.agreement_of(before)), ..*s }
     }
 
+    /// Whether a tracked fit agrees with the frame less than a track on the target does:
+    /// `min_track_agreement` less the frame's [`Self::noise_cost`] (never when not compared).
+    fn doubtful(&self, tracked: &Scored) -> bool {
+        let least = self.cfg.min_track_agreement - self.noise_cost();
+        tracked.agreement.is_some_and(|a| a < least)
+    }
+
     /// A tracked frame's answer: the track, unless its drawing disagrees with the frame (agreement
     /// under `min_track_agreement` less the frame's [`Self::noise_cost`]). Such a track has slid
     /// off the target (ICP and the fit stay in the basin they start in), so the frame is
     /// registered again with the track and its `start` as priors, and the registration taken if
-    /// it explains the frame better.
+    /// it explains the frame better. `None` (the frame is lost) where neither does and the
+    /// track explains the frame no better than drawing nothing: kept, such a track led the next
+    /// frames' registration onto a look-alike (two-planes' real path, 3.6 -> 44.6 deg).
     fn checked(
         &mut self,
         frame: &PerceptionFrame,
@@ -687,29 +702,29 @@ impl IcpTracker {
         tracked: Scored,
         start: &Pose,
         at: &Vector3<f64>,
-    ) -> (Scored, EstimateKind) {
-        let least = self.cfg.min_track_agreement - self.noise_cost();
-        if !tracked.agreement.is_some_and(|a| a < least) {
-            return (tracked, EstimateKind::Tracked);
+    ) -> Option<(Scored, EstimateKind)> {
+        if !self.doubtful(&tracked) {
+            return Some((tracked, EstimateKind::Tracked));
         }
+        let least = self.cfg.min_track_agreement - self.noise_cost();
         let priors = [tracked.fit.pose, self.placed(start, at), *start];
         let pixels = self.pixels(frame);
-        match self.register(frame, scene, &pixels, &priors) {
-            Some(r) => {
-                if debug() {
-                    debug_line!(
-                        "icp track {} doubtful ({tracked}, under {least:.3}): registered {r}",
-                        frame.seq
-                    );
-                }
-                if self.acceptable(&r) && r.score() > tracked.score() {
-                    (r, EstimateKind::Registered)
-                } else {
-                    (tracked, EstimateKind::Tracked)
-                }
+        if let Some(r) = self.register(frame, scene, &pixels, &priors) {
+            if debug() {
+                debug_line!(
+                    "icp track {} doubtful ({tracked}, under {least:.3}): registered {r}",
+                    frame.seq
+                );
             }
-            None => (tracked, EstimateKind::Tracked),
+            if self.acceptable(&r) && r.score() > tracked.score() {
+                return Some((r, EstimateKind::Registered));
+            }
         }
+        // The track stands, unless it has left the target.
+        if explains_nothing(&tracked) {
+            return None;
+        }
+        Some((tracked, EstimateKind::Tracked))
     }
 
     /// A registration refused for the silhouette, taken after all where it continues the track:
@@ -830,6 +845,7 @@ impl PoseEstimator for IcpTracker {
             rotation: p.rotation,
             weight: (seen_point_noise / self.cfg.prior_turn_deg.to_radians()).powi(2),
         });
+        let mut refused: Vec<(Scored, Pose)> = Vec::new();
         for start in &starts {
             let s = self.full_check(frame, &scene, start, Hidden::Skipped, prior.as_ref());
             // ICP is local: a fit that turned further than the target can between captures slid
@@ -848,14 +864,15 @@ impl PoseEstimator for IcpTracker {
             if turn > MAX_TURN_PER_FRAME_RAD {
                 continue;
             }
-            // Refined against the frame's pixels where that explains them better, and judged
-            // after: on the few hundred noisy pixels the stand leaves, ICP's nearest-sample
-            // pairing can end a fit just outside the checks that the pixels' fit passes.
-            let tracked = self.track_refined(frame, &scene, &s, start);
-            if self.acceptable(&tracked) {
-                let (s, kind) = self.checked(frame, &scene, tracked, start, &at);
-                return Ok(self.accept(&s, kind));
+            if self.acceptable(&s) {
+                // Refined against the frame's pixels where that explains them better.
+                let tracked = self.track_refined(frame, &scene, &s, start);
+                return Ok(match self.checked(frame, &scene, tracked, start, &at) {
+                    Some((s, kind)) => self.accept(&s, kind),
+                    None => self.lose(),
+                });
             }
+            refused.push((s, *start));
         }
         // Registration, its prior the track's prediction; without a track (reset, or lost) the
         // last good pose carried on by its motion.
@@ -884,10 +901,20 @@ impl PoseEstimator for IcpTracker {
             Some(s) => self.hidden_near_track(frame, &scene, &s, priors.first()),
             None => None,
         };
-        Ok(match taken {
-            Some(s) => self.accept(&s, EstimateKind::Registered),
-            None => self.lose(),
-        })
+        if let Some(s) = taken {
+            return Ok(self.accept(&s, EstimateKind::Registered));
+        }
+        // Neither a start's fit nor a registration passed: refined against the frame's pixels,
+        // a start's fit may (on the few hundred noisy pixels the stand leaves, ICP's
+        // nearest-sample pairing can end a fit just outside the checks that the pixels' fit
+        // passes). Not where it explains the frame no better than drawing nothing.
+        for (s, start) in &refused {
+            let tracked = self.track_refined(frame, &scene, s, start);
+            if self.acceptable(&tracked) && !explains_nothing(&tracked) {
+                return Ok(self.accept(&tracked, EstimateKind::Tracked));
+            }
+        }
+        Ok(self.lose())
     }
 
     fn reset(&mut self) {
