@@ -24,13 +24,15 @@
 //!   leaves the silhouette (registration counts parts hidden behind another object as outside:
 //!   with no track, a view must not be explained by hiding the part that tells look-alike poses
 //!   apart), or it sits in front of observed free space; then the tracker
-//!   re-registers on the same frame and reports `Lost` if that fails too. A registration
-//!   refused only for what another object hides is taken where it continues the track (within a
-//!   capture's largest turn of its prediction): that is no look-alike.
+//!   re-registers on the same frame. A registration refused only for what another object hides
+//!   is taken where it continues the track (within a capture's largest turn of its prediction):
+//!   that is no look-alike. If that fails too, each track start's fit is refined against the
+//!   frame's pixels and judged again; the frame is `Lost` if none passes.
 //! - A track that passes those checks but whose drawing disagrees with the frame's pixels more
 //!   than the frame's depth noise explains (`min_track_agreement`) may have slid onto a
 //!   look-alike pose: the frame is registered again with the track as the prior, and the better
-//!   explanation of the frame is taken.
+//!   explanation of the frame is taken; a track that explains the frame no better than drawing
+//!   nothing is not kept (`Lost`).
 //!
 //! Every threshold is relative to the model's size, so the tracker is scale-equivariant (the
 //! paper's depth normalisation changes nothing but rounding).
@@ -681,11 +683,16 @@ impl IcpTracker {
         Scored { agreement: Some(self.comparer.agreement_of(before)), ..*s }
     }
 
-    /// Whether a tracked fit agrees with the frame less than a track on the target does:
-    /// `min_track_agreement` less the frame's [`Self::noise_cost`] (never when not compared).
+    /// The least agreement of a track on the target: `min_track_agreement` less the frame's
+    /// [`Self::noise_cost`].
+    fn least_agreement(&self) -> f64 {
+        self.cfg.min_track_agreement - self.noise_cost()
+    }
+
+    /// Whether a tracked fit agrees with the frame less than a track on the target does
+    /// ([`Self::least_agreement`]; never when not compared).
     fn doubtful(&self, tracked: &Scored) -> bool {
-        let least = self.cfg.min_track_agreement - self.noise_cost();
-        tracked.agreement.is_some_and(|a| a < least)
+        tracked.agreement.is_some_and(|a| a < self.least_agreement())
     }
 
     /// A tracked frame's answer: the track, unless its drawing disagrees with the frame (agreement
@@ -706,14 +713,14 @@ impl IcpTracker {
         if !self.doubtful(&tracked) {
             return Some((tracked, EstimateKind::Tracked));
         }
-        let least = self.cfg.min_track_agreement - self.noise_cost();
         let priors = [tracked.fit.pose, self.placed(start, at), *start];
         let pixels = self.pixels(frame);
         if let Some(r) = self.register(frame, scene, &pixels, &priors) {
             if debug() {
                 debug_line!(
-                    "icp track {} doubtful ({tracked}, under {least:.3}): registered {r}",
-                    frame.seq
+                    "icp track {} doubtful ({tracked}, under {:.3}): registered {r}",
+                    frame.seq,
+                    self.least_agreement()
                 );
             }
             if self.acceptable(&r) && r.score() > tracked.score() {
