@@ -11,6 +11,7 @@
 
 pub mod backends;
 pub mod bench;
+pub mod bound;
 pub mod error;
 pub mod estimator;
 pub mod frame;
