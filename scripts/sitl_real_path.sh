@@ -6,17 +6,22 @@
 # same figures on any machine); each run scored by `hitl eval`. Prints one Markdown table.
 #   usage: scripts/sitl_real_path.sh [TARGET...]   (default: asymmetric one-plane two-planes; a
 #   built-in's name or an .obj/.stl path, whose file name names its outputs)
-#   HITL=path picks the binary (default ./target/release/hitl); RANGE=M the range (default 10).
+#   HITL=path picks the binary (default ./target/release/hitl); RANGE=M the range (default 10);
+#   ARC=FROM:TO plays that arc of argument of latitude instead of the preset's 270:630 (`hitl plan
+#   --arc`; 350:710 starts broadside, where the first frame, which the metric calibrates on, is
+#   pinned: docs/perception.md, "What the first frame can say at all"); OUT=dir (default
+#   runs/sitl-real-path).
 set -euo pipefail
 cd "$(dirname "$0")/.."
 HITL=${HITL:-./target/release/hitl}
 OUT=${OUT:-runs/sitl-real-path}
 RANGE=${RANGE:-10}
+ARC=${ARC:-}
 mkdir -p "$OUT"
 TARGETS=("$@"); [ ${#TARGETS[@]} -gt 0 ] || TARGETS=(asymmetric one-plane two-planes)
-plan="$OUT/flyaround-${RANGE}m.npz"
+plan="$OUT/flyaround-${RANGE}m${ARC:+-arc-${ARC/:/-}}.npz"
 $HITL plan --preset flyaround --range-m "$RANGE" --duration-s 20 --capture-every 5 \
-  --out "$plan" >/dev/null
+  ${ARC:+--arc "$ARC"} --out "$plan" >/dev/null
 echo "| range_m | target | frames | failures | mean e_t [m] | e_t / range | mean e_r [deg] | median e_r [deg] | goal (<= 2 % failed, e_r <= 1 deg, e_t <= 0.5 %) |"
 echo "| --- | --- | --- | --- | --- | --- | --- | --- | --- |"
 for t in "${TARGETS[@]}"; do

@@ -132,3 +132,19 @@ fn a_track_the_frame_disagrees_with_is_registered_again() {
     let (checked, kind) = track_across_a_jump("asymmetric", 35.0, 0.9);
     assert!(checked < 1.0 && kind == EstimateKind::Registered, "{checked:.2} deg, {kind:?}");
 }
+
+#[test]
+fn the_tracker_tells_a_depth_cameras_frames_from_rendered_depth() {
+    // A stereo camera's depth misses surfaces (the stand's thin legs): a tracked pose's drawing
+    // where the frame has no depth is not held against it. Rendered depth misses none: there a
+    // pixel without depth is empty space, as the orbit scene's sky is, and the outline counts.
+    let (stereo, gt, mesh) = frame("asymmetric", 40);
+    let mut t = IcpTracker::new(&mesh, IcpConfig::default()).unwrap();
+    t.estimate(&stereo).unwrap();
+    assert!(t.depth_misses_surfaces(), "the Orbbec model's depth taken for rendered depth");
+    let rendered = hitl_perception::testing::render(&mesh, &gt, &stereo.intrinsics, 41);
+    let mut t = IcpTracker::new(&mesh, IcpConfig::default()).unwrap();
+    let e = t.estimate(&rendered).unwrap();
+    assert_eq!(e.kind, EstimateKind::Registered);
+    assert!(!t.depth_misses_surfaces(), "rendered depth taken for a camera's");
+}

@@ -204,9 +204,10 @@ impl Comparer {
     /// where the frame has no depth costs 1 when [`Self::prepare`] was told [`Hidden::Miss`]
     /// (registration: the outline is most of what a small view says), nothing with
     /// [`Hidden::Skipped`] (tracking: a stereo camera sees no depth on the stand's thin legs
-    /// nor in the shadow they cast, and a track already says where the target is). Against
-    /// empty space (the orbit scene) that leaves a track's outline unheld outside the mask: its
-    /// price, measured in docs/perception.md.
+    /// nor in the shadow they cast, and a track already says where the target is). The tracker
+    /// says [`Hidden::Skipped`] only on a depth sensor's frames
+    /// ([`super::IcpTracker::depth_misses_surfaces`]): on rendered depth a pixel without depth is
+    /// empty space (the orbit scene's sky), and a track's outline there counts.
     pub fn disagreement(
         &mut self,
         frame: &PerceptionFrame,

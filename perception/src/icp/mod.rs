@@ -245,6 +245,12 @@ const TRACK_FIT_SHIFT: f64 = 0.002;
 /// the target's motion (a fly-around turns a few degrees per capture), so it is not carried on.
 const MAX_TURN_PER_FRAME_RAD: f64 = std::f64::consts::FRAC_PI_4;
 
+/// A frame whose depth noise costs a correct pose at least this much of its agreement
+/// ([`IcpTracker::depth_misses_surfaces`]) is a depth sensor's. Measured on the SITL recordings:
+/// noise-free (rendered) depth costs under 1e-4 (the noise estimate is f32 rounding, under
+/// 4e-7 m), the Orbbec model's stereo depth 0.1-0.2.
+const SENSOR_NOISE_COST: f64 = 1e-3;
+
 /// Outcome of one full check of a pose.
 #[derive(Debug, Clone, Copy)]
 struct Scored {
@@ -331,6 +337,16 @@ impl IcpTracker {
 
     pub fn config(&self) -> &IcpConfig {
         &self.cfg
+    }
+
+    /// Whether the last frame's depth is a sensor's, which misses surfaces, rather than
+    /// noise-free: its noise costs a correct pose measurably ([`SENSOR_NOISE_COST`]). Every
+    /// depth camera has noise and misses surfaces (a stereo camera sees none on the stand's thin
+    /// legs nor in their shadow); only rendered depth has neither, and there a pixel without
+    /// depth is empty space (the orbit scene's sky). Decides what a tracked pose's drawing off
+    /// the mask where the frame has no depth costs ([`compare::Comparer::disagreement`]).
+    pub fn depth_misses_surfaces(&self) -> bool {
+        self.noise_cost() >= SENSOR_NOISE_COST
     }
 
     fn tol(&self) -> f64 {
@@ -619,7 +635,9 @@ impl IcpTracker {
     /// does a registration, by degrees on a small view), `track_pixel_iters` pixel-wise steps
     /// ([`compare`]), then `track_fit_iters` of render-and-compare fitting ([`fit`]) from a small
     /// simplex (a tracked pose is near), scored as a tracked fit is: drawn pixels where the frame
-    /// has no depth off the mask are not held against it ([`Hidden::Skipped`]). Taken where it
+    /// has no depth off the mask are not held against it ([`Hidden::Skipped`]) where the frame's
+    /// depth is a sensor's ([`Self::depth_misses_surfaces`]; on noise-free depth they are empty
+    /// space and count as misses). Taken where it
     /// explains the frame better than the fit, turned less than a target turns between captures
     /// from the start and passes the acceptance (`s` itself may not have); else `s`. Either way
     /// with its agreement with the frame, where it was compared (not when fitting is off or the
@@ -635,7 +653,8 @@ impl IcpTracker {
         if (steps == 0 && fits == 0) || self.cfg.polish_points == 0 {
             return *s;
         }
-        self.comparer.prepare(frame, self.far_m, Hidden::Skipped);
+        let unseen = if self.depth_misses_surfaces() { Hidden::Skipped } else { Hidden::Miss };
+        self.comparer.prepare(frame, self.far_m, unseen);
         if self.comparer.target_pixels() > self.cfg.track_fit_max_pixels {
             return *s;
         }
