@@ -58,8 +58,14 @@ pub const SIM_CLOCK: [&str; 2] = ["--clock", "sim"];
 /// Plans a 20 s fly-around at `range_m` with a capture every `capture_every` waypoints into
 /// `out`, and checks `hitl plan` succeeded.
 pub fn plan_flyaround(out: &Path, range_m: &str, capture_every: &str) {
+    plan_flyaround_arc(out, range_m, capture_every, None);
+}
+
+/// [`plan_flyaround`] over the arc of argument of latitude `arc` (`hitl plan --arc FROM:TO`)
+/// instead of the preset's.
+pub fn plan_flyaround_arc(out: &Path, range_m: &str, capture_every: &str, arc: Option<&str>) {
     let out = out.to_str().expect("utf-8 path");
-    let plan = hitl(&[
+    let mut args = vec![
         "plan",
         "--preset",
         "flyaround",
@@ -71,7 +77,11 @@ pub fn plan_flyaround(out: &Path, range_m: &str, capture_every: &str) {
         capture_every,
         "--out",
         out,
-    ]);
+    ];
+    if let Some(arc) = arc {
+        args.extend(["--arc", arc]);
+    }
+    let plan = hitl(&args);
     assert_eq!(plan.status.code(), Some(0), "{}", String::from_utf8_lossy(&plan.stderr));
 }
 

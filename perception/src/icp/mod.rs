@@ -116,9 +116,11 @@ pub struct IcpConfig {
     /// Then up to this many steps pairing every target pixel with the drawn model at that pixel
     /// ([`compare::Comparer::refine`]); 0: none.
     pub pixel_iters: usize,
-    /// Pixel-wise steps after each tracked frame's ICP (the same refinement); 0: none, the
-    /// default: 5 took the SITL fly-around from 1.67 to 1.29 deg but each step draws the model,
-    /// and on the 55 000-face sat3 a tracked frame took 3.3x as long (docs/perception.md).
+    /// Pixel-wise steps after each tracked frame's ICP (the same refinement), before its
+    /// render-and-compare fit; 0: none. 20, as registration's: on the real path's stereo depth
+    /// they bring a track back to what a well pinned frame says after the loosely pinned end-on
+    /// views (docs/perception.md, "Tracked frames refined pixel by pixel"); each step draws the
+    /// model once, a tenth of what the fit's simplex draws.
     pub track_pixel_iters: usize,
     /// Render-and-compare fitting ([`fit`]), simplex iterations: of each distinct candidate
     /// registration's second stage leaves (up to `coarse_keep`), of each of the `polish_keep`
@@ -167,7 +169,7 @@ impl Default for IcpConfig {
             polish_iters: 60,
             polish_keep: 4,
             pixel_iters: 20,
-            track_pixel_iters: 0,
+            track_pixel_iters: 20,
             screen_fit_iters: 60,
             fit_iters: 300,
             track_fit_iters: 100,
