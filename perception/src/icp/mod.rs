@@ -120,7 +120,7 @@ pub struct IcpConfig {
     /// render-and-compare fit; 0: none. 20, as registration's: on the real path's stereo depth
     /// they bring a track back to what a well pinned frame says after the loosely pinned end-on
     /// views (docs/perception.md, "Tracked frames refined pixel by pixel"); each step draws the
-    /// model once, a tenth of what the fit's simplex draws.
+    /// model once, a tenth to a fifth of what the fit's simplex draws.
     pub track_pixel_iters: usize,
     /// Render-and-compare fitting ([`fit`]), simplex iterations: of each distinct candidate
     /// registration's second stage leaves (up to `coarse_keep`), of each of the `polish_keep`
@@ -639,9 +639,9 @@ impl IcpTracker {
     /// simplex (a tracked pose is near), scored as a tracked fit is: drawn pixels where the frame
     /// has no depth off the mask are not held against it ([`Hidden::Skipped`]) where the frame's
     /// depth is a sensor's ([`Self::depth_misses_surfaces`]; on noise-free depth they are empty
-    /// space and count as misses). Taken where it
-    /// explains the frame better than the fit, turned less than a target turns between captures
-    /// from the start and passes the acceptance (`s` itself may not have); else `s`. Either way
+    /// space and count as misses). Taken where it explains the frame better than the fit, turned
+    /// less than a target turns between captures from the start and passes the acceptance (`s`
+    /// itself may not have); else `s`. Either way
     /// with its agreement with the frame, where it was compared (not when fitting is off or the
     /// view is over `track_fit_max_pixels`).
     fn track_refined(
