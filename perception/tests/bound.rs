@@ -4,6 +4,7 @@
 //! charges nothing for a turn that moves the outline less than the margin.
 #![allow(clippy::unwrap_used)]
 
+use hitl_hal::Pose;
 use hitl_perception::bound::{depth_bound, mask_room};
 use hitl_perception::testing::{intrinsics_hfov, look_pose, render};
 use hitl_perception::{Mesh, PerceptionFrame};
@@ -33,26 +34,30 @@ impl Noise {
     }
 }
 
-/// The plate face on at 0.15 m, 640x400, with `sigma` metres of depth noise on every pixel.
-fn plate_frame(sigma: f64) -> (PerceptionFrame, Mesh) {
+/// Depth noise of the plate's frames, metres.
+const SIGMA: f64 = 5e-4;
+
+/// The plate face on at 0.15 m, 640x400, with `SIGMA` of depth noise on every pixel: the frame,
+/// the plate and its true pose.
+fn plate_frame() -> (PerceptionFrame, Mesh, Pose) {
     let mesh = plate();
     let k = intrinsics_hfov(640, 400, 60.0);
-    let mut f = render(&mesh, &look_pose(0.15, 0.0, 0.0, 0.0), &k, 1);
+    let truth = look_pose(0.15, 0.0, 0.0, 0.0);
+    let mut f = render(&mesh, &truth, &k, 1);
     let mut noise = Noise(0x5EED_1234_ABCD_0001);
     let depth: Vec<f32> = f
         .depth_m
         .iter()
-        .map(|&z| if z > 0.0 { (f64::from(z) + sigma * noise.gauss()) as f32 } else { 0.0 })
+        .map(|&z| if z > 0.0 { (f64::from(z) + SIGMA * noise.gauss()) as f32 } else { 0.0 })
         .collect();
     f.depth_m = depth.into();
-    (f, mesh)
+    (f, mesh, truth)
 }
 
 #[test]
 fn a_plate_face_on_pins_its_tilts_as_least_squares_does_and_its_roll_not_at_all() {
-    let sigma = 5e-4;
-    let (f, mesh) = plate_frame(sigma);
-    let truth = look_pose(0.15, 0.0, 0.0, 0.0);
+    let sigma = SIGMA;
+    let (f, mesh, truth) = plate_frame();
     let b = depth_bound(&f, &mesh, &truth, |_| sigma).unwrap();
     assert!(b.counted > 4000 && b.counted == b.target_pixels, "{b:?}");
     // A tilt by t about the camera's x axis moves the plate's depth at lateral offset y by t y:
@@ -91,9 +96,8 @@ fn a_plate_face_on_pins_its_tilts_as_least_squares_does_and_its_roll_not_at_all(
 
 #[test]
 fn the_noise_measured_at_the_truth_is_the_noise_the_frame_has() {
-    let sigma = 5e-4;
-    let (f, mesh) = plate_frame(sigma);
-    let truth = look_pose(0.15, 0.0, 0.0, 0.0);
+    let sigma = SIGMA;
+    let (f, mesh, truth) = plate_frame();
     let right = depth_bound(&f, &mesh, &truth, |_| sigma).unwrap();
     assert!((right.chi2_per_pixel - 1.0).abs() < 0.1, "{}", right.chi2_per_pixel);
     // Told half the noise, the pixels' spread is four times the model's (and those beyond 5
@@ -104,9 +108,8 @@ fn the_noise_measured_at_the_truth_is_the_noise_the_frame_has() {
 
 #[test]
 fn the_mask_charges_nothing_for_a_turn_that_moves_the_outline_less_than_its_margin() {
-    let sigma = 5e-4;
-    let (mut f, mesh) = plate_frame(sigma);
-    let truth = look_pose(0.15, 0.0, 0.0, 0.0);
+    let sigma = SIGMA;
+    let (mut f, mesh, truth) = plate_frame();
     // As a stereo camera and the controller's mask give it: no depth within 2 pixels of the
     // outline, the mask grown by 2 pixels.
     let (w, h) = (f.intrinsics.width as usize, f.intrinsics.height as usize);

@@ -641,9 +641,8 @@ impl IcpTracker {
     /// depth is a sensor's ([`Self::depth_misses_surfaces`]; on noise-free depth they are empty
     /// space and count as misses). Taken where it explains the frame better than the fit, turned
     /// less than a target turns between captures from the start and passes the acceptance (`s`
-    /// itself may not have); else `s`. Either way
-    /// with its agreement with the frame, where it was compared (not when fitting is off or the
-    /// view is over `track_fit_max_pixels`).
+    /// itself may not have); else `s`. Either way with its agreement with the frame, where it was
+    /// compared (not when fitting is off or the view is over `track_fit_max_pixels`).
     fn track_refined(
         &mut self,
         frame: &PerceptionFrame,
