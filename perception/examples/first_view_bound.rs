@@ -1,16 +1,21 @@
 //! Developer tool: how tightly one recorded frame can pin the target's pose at all, for any
 //! estimator ([`hitl_perception::bound`]). `cargo run --release -p hitl-perception --example
 //! first_view_bound -- RUN.mcap [FRAME] [TARGET]`: FRAME is the capture's index (default 0, the
-//! frame the paper's metric calibrates every other frame on) or `all` (a line per frame: its
-//! bounds and floor), TARGET the model (default the run's `target_model`). The depth noise is the simulated Orbbec Gemini 305's (`hitl run
+//! frame the paper's metric calibrates every other frame on) or `all`, TARGET the model (default
+//! the run's `target_model`). The depth noise is the simulated Orbbec Gemini 305's (`hitl run
 //! --depth-model orbbec`: sigma = 0.02 z^2), or `SIGMA_K` x z^2.
 //!
-//! Prints the pixels counted, how well the noise model fits them at the truth, the 1-sigma bound
-//! of an unbiased estimate's turn about each principal axis (camera axes, z the line of sight),
-//! the expected turn about the two best pinned ones (a floor under a run's mean e_r when this is
-//! its first frame), and how many pixels the mask charges a turn about each axis of 0.5-5 deg.
+//! For one frame: the pixels counted, how well the noise model fits them at the truth, the
+//! 1-sigma bound of an unbiased estimate's turn about each principal axis (camera axes, z the
+//! line of sight), the expected turn about the two best pinned ones (a floor under a run's mean
+//! e_r when this is its first frame), and how many pixels the mask charges a turn about each
+//! axis of 0.5-5 deg. With `all`: a line per frame (its bounds, that floor, and its calibrated
+//! floor against the first frame, [`hitl_perception::bound::calibrated_floor`]) and the run's
+//! floor, the calibrated floors' mean (the first frame scoring 0 as in the metric). `COV=1` adds
+//! a `cov` line per frame: its capture time (ns) and each turn's axis (camera axes) and 1-sigma
+//! (radians), for offline filtering experiments.
 
-use hitl_perception::bound::{depth_bound, mask_room};
+use hitl_perception::bound::{calibrated_floor, depth_bound, mask_room};
 use hitl_perception::TargetModel;
 use hitl_sim_stub::camera::noise::StereoDepth;
 use std::collections::BTreeMap;
@@ -44,6 +49,9 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     if frames.is_empty() {
         return Err("the recording has no such frame".into());
     }
+    // `all`: the first frame's bound, and each frame's floor under the metric's calibrated error.
+    let mut first = None;
+    let mut floors = Vec::new();
     for frame in &frames {
         let Some(truth) = gt.get(&frame.timestamp_ns).copied() else {
             println!("frame {}: no ground truth", frame.seq);
@@ -59,12 +67,31 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         if want.is_none() {
             let s: Vec<String> =
                 b.turns.iter().map(|t| format!("{:.2}", t.sigma_rad.to_degrees())).collect();
+            // The reference frame scores 0 by construction.
+            let floor = match &first {
+                None => 0.0,
+                Some((b0, t0, _)) => calibrated_floor(b0, t0, &b, &truth),
+            };
+            if first.is_none() {
+                first = Some((b.clone(), truth, frame.seq));
+            }
+            floors.push(floor);
+            if std::env::var_os("COV").is_some() {
+                let c: Vec<String> = b
+                    .turns
+                    .iter()
+                    .map(|t| format!("{} {} {} {}", t.axis.x, t.axis.y, t.axis.z, t.sigma_rad))
+                    .collect();
+                println!("cov {} {}", frame.timestamp_ns, c.join(" "));
+            }
             println!(
-                "frame {:>3}: {:>5} counted, 1-sigma turns {} deg, floor {:.2} deg",
+                "frame {:>3}: {:>5} counted, 1-sigma turns {} deg, floor {:.2} deg, \
+                 calibrated floor {:.2} deg",
                 frame.seq,
                 b.counted,
                 s.join(" "),
-                b.pinned_mean_rad().to_degrees()
+                b.pinned_mean_rad().to_degrees(),
+                floor.to_degrees()
             );
             continue;
         }
@@ -105,6 +132,16 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
             "  about the two best pinned axes: rms {:.3} deg, expected {:.3} deg (the floor)",
             b.pinned_rms_rad().to_degrees(),
             b.pinned_mean_rad().to_degrees()
+        );
+    }
+    if let (None, Some((_, _, reference))) = (want, &first) {
+        println!(
+            "the run's floor under mean e_r (frame {} the reference, {} of {} frames bounded): \
+             {:.2} deg",
+            reference,
+            floors.len(),
+            frames.len(),
+            (floors.iter().sum::<f64>() / floors.len() as f64).to_degrees()
         );
     }
     Ok(())
