@@ -9,7 +9,7 @@
 //! 1-sigma bound of an unbiased estimate's turn about each principal axis (camera axes, z the
 //! line of sight), the expected turn about the two best pinned ones (a floor under a run's mean
 //! e_r when this is its first frame), and how many pixels the mask charges a turn about each
-//! axis of 0.5-5 deg. With `all`: a line per frame (its bounds, that floor, and its calibrated
+//! axis of 0.5-20 deg. With `all`: a line per frame (its bounds, that floor, and its calibrated
 //! floor against the first frame, [`hitl_perception::bound::calibrated_floor`]) and the run's
 //! floor, the calibrated floors' mean (the first frame scoring 0 as in the metric). `COV=1` adds
 //! a `cov` line per frame: its capture time (ns) and each turn's axis (camera axes) and 1-sigma
@@ -108,7 +108,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
             b.chi2_per_pixel
         );
         for t in &b.turns {
-            let charged: Vec<String> = [0.5f64, 1.0, 2.0, 3.0, 5.0]
+            let charged: Vec<String> = [0.5f64, 1.0, 2.0, 3.0, 5.0, 10.0, 20.0]
                 .iter()
                 .map(|deg| {
                     let plus = mask_room(frame, &mesh, &truth, &b, &t.axis, deg.to_radians());
