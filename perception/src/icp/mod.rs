@@ -104,9 +104,10 @@ pub struct IcpConfig {
     pub prior_turn_deg: f64,
     /// Registration's last stage, render and compare ([`IcpTracker::compared`]): the second
     /// stage's distinct candidates (up to `coarse_keep`) are fitted briefly to the frame's
-    /// pixels; the `polish_keep` best are refined on up to `polish_points` target pixels with up
-    /// to `polish_iters` ICP steps, then by `pixel_iters` pixel-wise steps, fitted to convergence
-    /// and ranked by their agreement with the frame ([`compare`]). 4000 and 20 000 points gave
+    /// pixels; the `polish_keep` best (and the track's predictions, whatever their screening) are
+    /// refined on up to `polish_points` target pixels with up to `polish_iters` ICP steps, then
+    /// by `pixel_iters` pixel-wise steps, fitted to convergence and ranked by their agreement
+    /// with the frame ([`compare`]). 4000 and 20 000 points gave
     /// the same figures. 0 points: the stage is off (the best `keep` candidates are refined on
     /// the tracking cloud and ranked as the earlier stages; tracked frames are not refined
     /// against the pixels either).
@@ -490,7 +491,7 @@ impl IcpTracker {
             .chain(priors.iter().map(|p| rank(&dense, p, self.cfg.coarse_iters, 0.15 * d).1))
             .collect();
         let mut checked: Vec<Scored> = if compare {
-            self.compared(frame, pixels, &starts)
+            self.compared(frame, pixels, &starts, priors.len())
         } else {
             starts.iter().map(|p| self.full_check(frame, scene, p, Hidden::Miss, None)).collect()
         };
@@ -546,35 +547,41 @@ impl IcpTracker {
     /// briefly (`screen_fit_iters`) to the frame's pixels; the `polish_keep` best of those (not
     /// two the same pose) refined by ICP on every target pixel (`polish_points`, `polish_iters`)
     /// and pixel-wise steps (`pixel_iters`), each kept only where the frame agrees better, then
-    /// fitted to convergence (`fit_iters`) and ranked by their agreement with the frame.
+    /// fitted to convergence (`fit_iters`) and ranked by their agreement with the frame. The last
+    /// `priors` starts (the track's predictions) go through whatever their screening: the
+    /// registration keeps the track's branch among hypotheses as good as the best, so the branch
+    /// must be among them (on an end-on view the look-alikes screen as well as the track).
     fn compared(
         &mut self,
         frame: &PerceptionFrame,
         pixels: &[Vector3<f64>],
         starts: &[Pose],
+        priors: usize,
     ) -> Vec<Scored> {
         self.comparer.prepare(frame, self.far_m, Hidden::Miss);
         let t0 = std::time::Instant::now();
         let (tol, far, d) = (self.pixel_tol(), self.far_m, self.model.diameter);
         let screen = FitSteps { turn_rad: FIT_TURN_RAD, shift_m: FIT_SHIFT * d, iters: 0 };
-        let mut screened: Vec<(f64, Pose)> = starts
+        let first_prior = starts.len().saturating_sub(priors);
+        let mut screened: Vec<(f64, Pose, bool)> = starts
             .iter()
-            .map(|p| {
+            .enumerate()
+            .map(|(i, p)| {
                 let steps = FitSteps { iters: self.cfg.screen_fit_iters, ..screen };
                 let (pose, cost) = fit::fit(&mut self.comparer, frame, p, steps, tol, far);
-                (cost, pose)
+                (cost, pose, i >= first_prior)
             })
             .collect();
         screened.sort_by(|a, b| a.0.total_cmp(&b.0));
         if debug() {
-            let l: Vec<String> = screened.iter().map(|(c, _)| format!("{c:.1}")).collect();
+            let l: Vec<String> = screened.iter().map(|(c, _, _)| format!("{c:.1}")).collect();
             debug_line!("icp screened (disagreement, px): {}", l.join(" "));
         }
         let mut picked: Vec<Pose> = Vec::new();
         let mut out = Vec::new();
-        for (_, start) in screened {
-            if picked.len() >= self.cfg.polish_keep.max(1) {
-                break;
+        for (_, start, prior) in screened {
+            if picked.len() >= self.cfg.polish_keep.max(1) && !prior {
+                continue;
             }
             if picked.iter().any(|p| self.same_pose(p, &start)) {
                 continue;
@@ -997,5 +1004,27 @@ mod tests {
         // Noise a tenth of the geometric tolerance costs (1/10)^2.
         t.pixel_noise_tol = t.cfg.noise_sigmas * 0.1 * t.tol();
         assert!((t.noise_cost() - 0.01).abs() < 1e-9, "{}", t.noise_cost());
+    }
+
+    #[test]
+    fn the_tracks_prediction_reaches_the_last_comparison_however_it_screens() {
+        // One start at the truth and the track's prediction 120 deg off it; the last stage keeps
+        // one start. The truth screens better, and the prediction is compared all the same (the
+        // registration's tie-break needs it there); a start that is not a prediction is not.
+        let mesh = TargetModel::from_spec("asymmetric").unwrap().lab_mesh(0.1).unwrap();
+        let cfg = IcpConfig { polish_keep: 1, ..IcpConfig::default() };
+        let mut t = IcpTracker::new(&mesh, cfg).unwrap();
+        let k = crate::testing::intrinsics_hfov(160, 128, 36.5);
+        let truth = crate::testing::look_pose(1.0, 0.5, -0.3, 0.2);
+        let frame = crate::testing::render(&mesh, &truth, &k, 1);
+        let off = truth
+            * nalgebra::UnitQuaternion::from_axis_angle(&Vector3::x_axis(), 120f64.to_radians());
+        let pixels = t.pixels(&frame);
+        let compared = t.compared(&frame, &pixels, &[truth, off], 1);
+        assert_eq!(compared.len(), 2);
+        assert!(rotation_distance(&compared[0].fit.pose, &truth) < 1f64.to_radians());
+        assert!(rotation_distance(&compared[1].fit.pose, &truth) > 10f64.to_radians());
+        assert!(compared[0].score() > compared[1].score());
+        assert_eq!(t.compared(&frame, &pixels, &[truth, off], 0).len(), 1);
     }
 }
