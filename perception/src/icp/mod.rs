@@ -107,10 +107,9 @@ pub struct IcpConfig {
     /// pixels; the `polish_keep` best (and the track's predictions, whatever their screening) are
     /// refined on up to `polish_points` target pixels with up to `polish_iters` ICP steps, then
     /// by `pixel_iters` pixel-wise steps, fitted to convergence and ranked by their agreement
-    /// with the frame ([`compare`]). 4000 and 20 000 points gave
-    /// the same figures. 0 points: the stage is off (the best `keep` candidates are refined on
-    /// the tracking cloud and ranked as the earlier stages; tracked frames are not refined
-    /// against the pixels either).
+    /// with the frame ([`compare`]). 4000 and 20 000 points gave the same figures. 0 points: the
+    /// stage is off (the best `keep` candidates are refined on the tracking cloud and ranked as
+    /// the earlier stages; tracked frames are not refined against the pixels either).
     pub polish_points: usize,
     pub polish_iters: usize,
     pub polish_keep: usize,
