@@ -8,8 +8,8 @@
 //! For one frame: the pixels counted, how well the noise model fits them at the truth, the
 //! 1-sigma bound of an unbiased estimate's turn about each principal axis (camera axes, z the
 //! line of sight), the expected turn about the two best pinned ones (a floor under a run's mean
-//! e_r when this is its first frame), and how many pixels the mask charges a turn about each
-//! axis of 0.5-20 deg. With `all`: a line per frame (its bounds, that floor, and its calibrated
+//! e_r when this is its first frame), the same with turns over 10 deg ruled out, and how many
+//! pixels the mask charges a turn about each axis of 0.5-20 deg. With `all`: a line per frame (its bounds, that floor, and its calibrated
 //! floor against the first frame, [`hitl_perception::bound::calibrated_floor`]) and the run's
 //! floor, the calibrated floors' mean (the first frame scoring 0 as in the metric). `COV=1` adds
 //! a `cov` line per frame: its capture time (ns) and each turn's axis (camera axes) and 1-sigma
@@ -133,6 +133,11 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
             b.pinned_rms_rad().to_degrees(),
             b.pinned_mean_rad().to_degrees()
         );
+        let cut = 10f64.to_radians();
+        println!(
+            "  the same if the mask ruled out every turn over 10 deg about them: {:.3} deg",
+            expected_turn_within(b.turns[0].sigma_rad, b.turns[1].sigma_rad, cut).to_degrees()
+        );
     }
     if let (None, Some((_, _, reference))) = (want, &first) {
         println!(
@@ -145,4 +150,22 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         );
     }
     Ok(())
+}
+
+/// The expected length of a turn (x, y), x ~ N(0, a^2) and y ~ N(0, b^2), both cut at +-`cut`
+/// (what is left of the Gaussian where the mask rules out larger turns): a midpoint rule.
+fn expected_turn_within(a: f64, b: f64, cut: f64) -> f64 {
+    let n = 400;
+    let at = |i: usize| cut * (-1.0 + 2.0 * (i as f64 + 0.5) / n as f64);
+    let (mut sum, mut weight) = (0.0, 0.0);
+    for i in 0..n {
+        let x = at(i);
+        for j in 0..n {
+            let y = at(j);
+            let w = (-0.5 * ((x / a).powi(2) + (y / b).powi(2))).exp();
+            sum += w * x.hypot(y);
+            weight += w;
+        }
+    }
+    sum / weight
 }

@@ -8,6 +8,9 @@ use hitl_hal::Pose;
 use hitl_perception::bound::{depth_bound, mask_room};
 use hitl_perception::testing::{intrinsics_hfov, look_pose, render};
 use hitl_perception::{Mesh, PerceptionFrame};
+use rand::rngs::Xoshiro256PlusPlus;
+use rand::SeedableRng;
+use rand_distr::{Distribution, StandardNormal};
 
 /// A square plate 20 mm on a side in the target's x-y plane, centred on its origin.
 fn plate() -> Mesh {
@@ -17,21 +20,6 @@ fn plate() -> Mesh {
         vec![[0, 1, 2], [0, 2, 3]],
     )
     .unwrap()
-}
-
-/// Gaussian draws from a fixed seed (xorshift and Box-Muller): the test's own noise.
-struct Noise(u64);
-impl Noise {
-    fn uniform(&mut self) -> f64 {
-        self.0 ^= self.0 << 13;
-        self.0 ^= self.0 >> 7;
-        self.0 ^= self.0 << 17;
-        ((self.0 >> 11) as f64 + 0.5) / (1u64 << 53) as f64
-    }
-    fn gauss(&mut self) -> f64 {
-        let (a, b) = (self.uniform(), self.uniform());
-        (-2.0 * a.ln()).sqrt() * (std::f64::consts::TAU * b).cos()
-    }
 }
 
 /// Depth noise of the plate's frames, metres.
@@ -44,11 +32,18 @@ fn plate_frame() -> (PerceptionFrame, Mesh, Pose) {
     let k = intrinsics_hfov(640, 400, 60.0);
     let truth = look_pose(0.15, 0.0, 0.0, 0.0);
     let mut f = render(&mesh, &truth, &k, 1);
-    let mut noise = Noise(0x5EED_1234_ABCD_0001);
+    let mut rng = Xoshiro256PlusPlus::seed_from_u64(0x5EED_1234_ABCD_0001);
     let depth: Vec<f32> = f
         .depth_m
         .iter()
-        .map(|&z| if z > 0.0 { (f64::from(z) + SIGMA * noise.gauss()) as f32 } else { 0.0 })
+        .map(|&z| {
+            let noise: f64 = StandardNormal.sample(&mut rng);
+            if z > 0.0 {
+                (f64::from(z) + SIGMA * noise) as f32
+            } else {
+                0.0
+            }
+        })
         .collect();
     f.depth_m = depth.into();
     (f, mesh, truth)
