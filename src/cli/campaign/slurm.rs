@@ -339,6 +339,7 @@ mod tests {
         }
         assert!(!t.contains("--account"));
         assert_eq!(q("it's"), "'it'\\''s'");
+        assert_eq!(shell_words(&q("/it's")), Ok(vec!["/it's".to_string()]));
     }
 
     fn script() -> Script {
@@ -422,6 +423,13 @@ mod tests {
                         return Err(format!("double-quoted {inner:?}"));
                     }
                     w.push_str(&inner);
+                }
+                '\\' => {
+                    in_word = true;
+                    match chars.next() {
+                        Some('\n') | None => return Err("backslash at the end of a line".into()),
+                        Some(x) => w.push(x),
+                    }
                 }
                 c if c.is_ascii_alphanumeric() || "/._-+=:,@%".contains(c) => {
                     in_word = true;
