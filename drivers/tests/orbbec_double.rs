@@ -508,7 +508,12 @@ fn a_fault_writes_the_configuration_back_at_once() {
     let e = next_frame(&mut r, Duration::from_secs(2)).expect_err("tripped");
     assert_eq!(e.kind(), ErrorKind::DeviceFault);
     eventually(&r, "written back after the fault, before any close", |d| *d == factory());
-    assert_eq!(marker::read(&r.marker()), Ok(None));
+    // The worker removes the state file just after the last write back: wait for it too.
+    let end = Instant::now() + Duration::from_secs(5);
+    while marker::read(&r.marker()) != Ok(None) {
+        assert!(Instant::now() < end, "state file left after the write back");
+        std::thread::sleep(Duration::from_millis(2));
+    }
     assert_eq!(r.cam.health().map_err(|e| e.kind()), Err(ErrorKind::DeviceFault));
     r.cam.stop().expect("closing a tripped camera: nothing left to write back");
 }
