@@ -273,7 +273,8 @@ fn log(r: &Rig) -> Vec<String> {
 
 #[test]
 fn a_hardware_triggered_frame_comes_back_paired_and_in_metres() {
-    let mut r = armed(0x0842, true, |_| {});
+    // Room for a loaded machine between the trigger and the frame (expiry is not tested here).
+    let mut r = armed(0x0842, true, |o| o.frame_timeout = Duration::from_secs(1));
     assert_eq!(r.cam.trigger_mode(), Some(TriggerMode::Hardware));
     let armed = r.cam.armed().expect("armed");
     assert!(armed.exposure_reference_middle && armed.global_timestamps);
@@ -308,7 +309,10 @@ fn a_hardware_triggered_frame_comes_back_paired_and_in_metres() {
 
 #[test]
 fn without_global_timestamps_the_frame_says_it_carries_its_arrival_time() {
-    let mut r = armed(0x0840, false, |o| o.trigger = TriggerChoice::Software);
+    let mut r = armed(0x0840, false, |o| {
+        o.trigger = TriggerChoice::Software;
+        o.frame_timeout = Duration::from_secs(1); // the 25 ms sleep may overshoot under load
+    });
     let req = fire(&mut r, 3);
     std::thread::sleep(Duration::from_millis(25)); // the frameset arrives 21 ms after the trigger
     r.steps.send(Step::Frames(frameset(&r, req.fired_ns + 1_000_000, 1, false))).expect("send");
@@ -356,7 +360,8 @@ fn a_frame_older_than_its_trigger_is_stale_and_the_trigger_is_missed_not_a_fault
     // Exposed 5 ms BEFORE the trigger fired: not this trigger's frame.
     r.steps.send(Step::Frames(frameset(&r, first.fired_ns - 5_000_000, 1, true))).expect("send");
     let end = Instant::now() + Duration::from_secs(5);
-    while r.cam.frames_missed() == 0 && Instant::now() < end {
+    // Stale is counted when the frameset is read, missed when the trigger expires: wait for both.
+    while (r.cam.frames_missed() == 0 || r.cam.frames_stale() == 0) && Instant::now() < end {
         assert_eq!(r.cam.poll_frame(), Ok(None), "no frame for trigger 1, and no fault");
         std::thread::sleep(Duration::from_millis(2));
     }
@@ -421,14 +426,19 @@ fn a_full_capture_queue_is_busy_not_a_fault() {
 
 #[test]
 fn refused_metadata_is_counted_and_named_when_the_camera_trips() {
-    let mut r = armed(0x0840, true, |o| o.max_consecutive_missed = 1);
+    // The frameset must be read (and refused) before the trigger expires and trips the camera;
+    // a second gives a loaded machine room for that.
+    let mut r = armed(0x0840, true, |o| {
+        o.max_consecutive_missed = 1;
+        o.frame_timeout = Duration::from_secs(1);
+    });
     let req = fire(&mut r, 1);
     let mut bad = frameset(&r, req.fired_ns + 100_000, 1, true);
     if let Some(d) = bad.depth.as_mut() {
         d.meta.width = 4; // depth not aligned to colour
     }
     r.steps.send(Step::Frames(bad)).expect("send");
-    let e = next_frame(&mut r, Duration::from_secs(2)).expect_err("trips after the miss");
+    let e = next_frame(&mut r, Duration::from_secs(5)).expect_err("trips after the miss");
     assert_eq!(e.kind(), ErrorKind::DeviceFault);
     assert_eq!(r.cam.frames_refused(), 1);
     let detail = r.cam.fault_detail().expect("detail").message().to_string();

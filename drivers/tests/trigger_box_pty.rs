@@ -258,12 +258,14 @@ async fn light_level_and_strobe_become_commands() {
     tb.set_level(0.5).expect("level");
     tb.set_level(0.25).expect("level");
     tb.strobe(1.0, 2000).expect("strobe");
+    // A poll writes the strobe before the level, so wait for both to arrive.
     let lines = eventually(Duration::from_secs(2), || {
         let r = peer.received();
-        r.iter().any(|l| l.starts_with("S ")).then_some(r)
+        let level = r.iter().any(|l| l.starts_with("L ") && l.ends_with(" 250"));
+        (level && r.iter().any(|l| l.starts_with("S "))).then_some(r)
     })
     .await
-    .expect("strobe sent");
+    .expect("strobe and level sent");
     let levels: Vec<&str> = lines
         .iter()
         .filter(|l| l.starts_with("L "))
@@ -399,7 +401,12 @@ async fn open_waits_for_a_box_that_resets_and_ignores_its_banner() {
     let b = Arc::clone(&peer.b);
     let path = peer.path.clone();
     let opening = tokio::spawn(async move {
-        let cfg = TriggerBoxConfig { open_timeout: Duration::from_millis(500), ..config() };
+        // The banner comes 0.8 s in; 5 s to see it leaves a loaded machine room.
+        let cfg = TriggerBoxConfig {
+            open_timeout: Duration::from_millis(500),
+            start_timeout: Duration::from_secs(5),
+            ..config()
+        };
         TriggerBox::open(&path, cfg, MonotonicClock::new()).await
     });
     tokio::time::sleep(Duration::from_millis(800)).await;
@@ -518,7 +525,10 @@ async fn a_busy_fire_is_sent_again_and_counted_not_a_fault() {
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn a_command_the_box_dropped_is_sent_again() {
     let peer = BoxPeer::start();
-    let mut tb = open(&peer).await;
+    // Room for the retry: the drop is only known once the level's answer is back, which on a
+    // loaded machine can take longer than the default retry window for a fire.
+    let cfg = TriggerBoxConfig { busy_retry_for: Duration::from_millis(200), ..config() };
+    let mut tb = TriggerBox::open(&peer.path, cfg, MonotonicClock::new()).await.expect("open");
     peer.b.drop_commands.store(1, Ordering::SeqCst);
     // The fire goes first and is dropped; the level after it is answered, which shows the fire
     // was the one dropped.

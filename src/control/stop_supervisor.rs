@@ -128,7 +128,7 @@ pub fn supervise_stop<A: Arm + ?Sized>(
 #[cfg(test)]
 mod tests {
     use super::*;
-    use hitl_hal::{ErrorKind, ErrorType, Joints, MonotonicClock};
+    use hitl_hal::{ErrorKind, ErrorType, Joints, MonotonicClock, SimTime};
     use std::cell::Cell;
     use std::rc::Rc;
 
@@ -177,41 +177,51 @@ mod tests {
         }
     }
 
+    /// A simulated clock, started at 1 ms, that `latest` moves on by one poll (1 ms) each time it
+    /// is asked, so the schedule is the same however the machine is loaded.
+    fn stepped() -> (MonotonicClock, impl Fn() -> u64) {
+        let time = SimTime::new();
+        time.advance_to(1_000_000);
+        let clock = MonotonicClock::simulated(time.clone());
+        (clock, move || {
+            let t = time.now_ns() + 1_000_000;
+            time.advance_to(t);
+            t
+        })
+    }
+
     #[test]
     fn repeats_until_a_fresh_report_shows_the_stop() {
-        let clock = MonotonicClock::new();
+        let (clock, tick) = stepped();
         let stops = Rc::new(Cell::new(0));
         let mut arm = Box4 { stops: Rc::clone(&stops), fail: false };
-        // A stale report already says 4: it must not count. The box stops on the third request.
+        // A stale report already says 4: it must not count. The box stops on the third request
+        // (sent 20 ms after the start); the next report, 2 ms later (one poll each), confirms.
         let seen = Rc::clone(&stops);
-        let c = clock.clone();
-        let mut latest =
-            move || Some(if seen.get() >= 3 { state(c.now_ns(), 4) } else { state(0, 4) });
+        let mut latest = move || {
+            let now = tick();
+            Some(if seen.get() >= 3 { state(now, 4) } else { state(0, 4) })
+        };
         let r = supervise_stop(&mut arm, &mut latest, &clock, fast());
         assert!(r.confirmed, "{r:?}");
         assert_eq!(r.requests, 3);
         assert_eq!(r.last_state, Some(4));
-        assert!(r.waited_ns >= 15_000_000 && r.waited_ns < 200_000_000, "{r:?}");
+        assert_eq!(r.waited_ns, 22_000_000, "{r:?}");
         assert!(r.describe().contains("confirmed"), "{}", r.describe());
     }
 
     #[test]
     fn gives_up_and_says_so() {
-        let clock = MonotonicClock::new();
+        let (clock, tick) = stepped();
         let stops = Rc::new(Cell::new(0));
         let mut arm = Box4 { stops: Rc::clone(&stops), fail: true };
-        let c = clock.clone();
-        let mut latest = move || Some(state(c.now_ns(), 1));
-        let t = std::time::Instant::now();
+        let mut latest = move || Some(state(tick(), 1));
         let r = supervise_stop(&mut arm, &mut latest, &clock, fast());
-        let took = t.elapsed();
         assert!(!r.confirmed);
-        assert!(
-            took >= Duration::from_millis(300) && took < Duration::from_millis(600),
-            "{took:?}"
-        );
-        // One request every 10 ms for 300 ms.
-        assert!((28..=32).contains(&r.requests), "{r:?}");
+        assert_eq!(r.waited_ns, 300_000_000, "{r:?}");
+        // One request every 10 ms for 300 ms: at 0, 10, ..., 290 ms.
+        assert_eq!(r.requests, 30, "{r:?}");
+        assert_eq!(stops.get(), 30);
         assert_eq!(r.send_errors, r.requests);
         assert_eq!(r.last_state, Some(1));
         let d = r.describe();
