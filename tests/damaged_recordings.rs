@@ -105,6 +105,12 @@ fn record(path: &Path, n: u64, estimates: bool) {
             trigger_ns: Some(t - 1_000_000),
             light_level: None,
         };
+        // The writer may lag on a loaded machine: wait for room (a full queue drops by design).
+        let end = std::time::Instant::now() + std::time::Duration::from_secs(10);
+        while !tel.frame_queue_has_room() {
+            assert!(std::time::Instant::now() < end, "the writer took no frame for 10 s");
+            std::thread::sleep(std::time::Duration::from_millis(2));
+        }
         assert!(tel.push_frame(frame), "frame {k} dropped");
         if estimates {
             tel.push_pose_estimate(&PoseStamped { capture_ns: t, pose });

@@ -172,9 +172,10 @@ fn sigkill_loses_at_most_the_last_second() {
         last_s >= alive_s - 1.0,
         "last setpoint at {last_s:.3} s, killed after {alive_s:.3} s: more than 1 s lost ({v})"
     );
-    // 250 Hz nominal; sleep granularity makes it a little slower.
+    // 250 Hz nominal; sleep granularity makes it a little slower, and a loaded machine can
+    // starve the child (the bound is about the recorder keeping what was pushed, not the rate).
     let n = count(&v, "/arm/setpoint");
-    assert!(n as f64 >= (alive_s - 1.0) * 150.0, "only {n} setpoints in {alive_s:.2} s");
+    assert!(n as f64 >= (alive_s - 1.0) * 50.0, "only {n} setpoints in {alive_s:.2} s");
     assert!(count(&v, "/camera/depth") >= 10, "{v}");
     assert!(v["depth"]["width"] == 64, "{v}");
 
