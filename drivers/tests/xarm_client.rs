@@ -88,7 +88,8 @@ fn stop_returns_without_its_reply_and_discards_it_later() {
     let mut arm = XarmClient::connect(addr, ClientConfig::default()).expect("connects");
     let t = Instant::now();
     arm.stop().expect("written");
-    assert!(t.elapsed() < Duration::from_millis(50), "stop waited {:?}", t.elapsed());
+    // Well under the reply's 300 ms (room for a loaded machine): the stop did not wait for it.
+    assert!(t.elapsed() < Duration::from_millis(200), "stop waited {:?}", t.elapsed());
     assert_eq!(arm.outstanding(), 1);
     // A request after it gets its own reply; the stop's is taken on the way and discarded.
     arm.clean_warn().expect("clean_warn answered");

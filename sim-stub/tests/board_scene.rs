@@ -20,7 +20,13 @@ fn step_time_us(lab: &LabConfig) -> f64 {
 #[test]
 fn the_board_is_drawn_and_decoded_where_it_is() {
     let lab = LabConfig { board: Some(BoardPlacement::default()), ..LabConfig::default() };
-    let (with, without) = (step_time_us(&lab), step_time_us(&LabConfig::default()));
+    // The best of three, taken in turn, so that a busy machine slowing one measurement does not
+    // read as the board's cost.
+    let (mut with, mut without) = (f64::INFINITY, f64::INFINITY);
+    for _ in 0..3 {
+        with = with.min(step_time_us(&lab));
+        without = without.min(step_time_us(&LabConfig::default()));
+    }
     eprintln!("MuJoCo step: {with:.1} us with the board, {without:.1} us without");
     assert!(with < 4.0 * without + 50.0, "the board slows the physics: {with} vs {without} us");
 
