@@ -327,14 +327,19 @@ fn spawn_run() -> (tempfile::TempDir, PathBuf, std::process::Child) {
 /// Plays the test trajectory, presses Ctrl-C `presses` times 20 ms apart once playback has
 /// begun, and checks the run ends in a controlled stop with exit 130 and a closed recording.
 fn ctrl_c_case(presses: usize) {
+    signal_case("-INT", presses, 20);
+}
+
+/// [`ctrl_c_case`] with `signal` sent `times` times, `apart_ms` apart; returns what was printed.
+fn signal_case(signal: &str, times: usize, apart_ms: u64) -> String {
     let _one = ONE_AT_A_TIME.lock().unwrap_or_else(|e| e.into_inner());
     let (_dir, mcap, child) = spawn_run();
-    // Wait until playback has begun, then press Ctrl-C.
+    // Wait until playback has begun, then send the signal.
     std::thread::sleep(std::time::Duration::from_millis(1500));
-    for _ in 0..presses {
-        let status = Command::new("kill").args(["-INT", &child.id().to_string()]).status();
+    for _ in 0..times {
+        let status = Command::new("kill").args([signal, &child.id().to_string()]).status();
         assert!(status.is_ok_and(|s| s.success()));
-        std::thread::sleep(std::time::Duration::from_millis(20));
+        std::thread::sleep(std::time::Duration::from_millis(apart_ms));
     }
     let out = child.wait_with_output().expect("wait");
     assert_eq!(code(&out), 130, "{}", text(&out));
@@ -342,9 +347,10 @@ fn ctrl_c_case(presses: usize) {
     assert!(rec.end.as_ref().is_some_and(|e| e.complete), "the file has its footer");
     assert!(rec.events.iter().any(|e| e.kind == "operator-stop"), "{:?}", rec.events);
     assert!(rec.setpoints.iter().any(|s| s.phase == Phase::Stop));
-    if presses == 2 {
+    if signal == "-INT" && times == 2 {
         assert!(text(&out).contains("controlled stop in progress"), "{}", text(&out));
     }
+    text(&out)
 }
 
 #[test]
@@ -356,6 +362,16 @@ fn ctrl_c_takes_a_controlled_stop_and_exits_130() {
 fn a_second_ctrl_c_does_not_cut_the_controlled_stop_short() {
     // Before, the second press ended the process at once: no footer, no completed stop.
     ctrl_c_case(2);
+}
+
+#[test]
+fn a_burst_of_hang_ups_is_one_controlled_stop() {
+    // What a campaign's `kill -9` delivers to its run: a parent-death SIGHUP for each campaign
+    // thread the run passes through as they die, within a millisecond or so. Taken as Ctrl-C
+    // presses, the third abandoned the stop (no footer, no stop phase, seen in campaign_guards).
+    let said = signal_case("-HUP", 5, 1);
+    assert_eq!(said.matches("hitl: hang-up (SIGHUP").count(), 1, "said once: {said}");
+    assert!(!said.contains("controlled stop in progress"), "not counted as presses: {said}");
 }
 
 #[test]

@@ -3,9 +3,12 @@
 //!
 //! - each child runs in a process group of its own, so a terminal's Ctrl-C reaches the campaign
 //!   only, and the campaign hands it on ([`interrupt_all`]) to every child it is waiting for;
-//! - each child asks the kernel for SIGINT when the campaign dies (`PR_SET_PDEATHSIG`), however
-//!   it dies (`kill -9` included): `hitl run` then makes the controlled stop Ctrl-C makes (its
-//!   handler is for SIGINT; SIGTERM would end it on the spot), `hitl plan` and `hitl eval` end;
+//! - each child asks the kernel for SIGHUP when the campaign dies (`PR_SET_PDEATHSIG`), however
+//!   it dies (`kill -9` included): `hitl run` then makes the controlled stop Ctrl-C makes
+//!   (SIGTERM would end it on the spot), `hitl plan` and `hitl eval` end. Not SIGINT: the kernel
+//!   sends the signal again each time the child passes from a dying campaign thread to the next,
+//!   and a run counts SIGINTs as presses (the third abandons its stop); it takes any number of
+//!   SIGHUPs as one request;
 //! - the children's pids are known only while they can be signalled: a child is reaped and
 //!   removed under the same lock [`interrupt_all`] signals under, so a reused pid is never hit.
 
@@ -39,7 +42,7 @@ pub fn run(mut cmd: Command) -> io::Result<ExitStatus> {
     // waiting for the child below, which lives until the child has ended (or the process dies).
     unsafe {
         cmd.pre_exec(move || {
-            if libc::prctl(libc::PR_SET_PDEATHSIG, libc::SIGINT as libc::c_ulong) != 0 {
+            if libc::prctl(libc::PR_SET_PDEATHSIG, libc::SIGHUP as libc::c_ulong) != 0 {
                 return Err(io::Error::last_os_error());
             }
             // The campaign died before the request took effect: its signal will never come.
