@@ -15,7 +15,7 @@
 //! a `cov` line per frame: its capture time (ns) and each turn's axis (camera axes) and 1-sigma
 //! (radians), for offline filtering experiments.
 
-use hitl_perception::bound::{calibrated_floor, depth_bound, mask_room};
+use hitl_perception::bound::{calibrated_floor, depth_bound, expected_turn_within, mask_room};
 use hitl_perception::TargetModel;
 use hitl_sim_stub::camera::noise::StereoDepth;
 use std::collections::BTreeMap;
@@ -136,7 +136,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         let cut = 10f64.to_radians();
         println!(
             "  the same if the mask ruled out every turn over 10 deg about them: {:.3} deg",
-            expected_turn_within(b.turns[0].sigma_rad, b.turns[1].sigma_rad, cut).to_degrees()
+            expected_turn_within(&b.pinned_covariance(), cut).to_degrees()
         );
     }
     if let (None, Some((_, _, reference))) = (want, &first) {
@@ -150,22 +150,4 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         );
     }
     Ok(())
-}
-
-/// The expected length of a turn (x, y), x ~ N(0, a^2) and y ~ N(0, b^2), both cut at +-`cut`
-/// (what is left of the Gaussian where the mask rules out larger turns): a midpoint rule.
-fn expected_turn_within(a: f64, b: f64, cut: f64) -> f64 {
-    let n = 400;
-    let at = |i: usize| cut * (-1.0 + 2.0 * (i as f64 + 0.5) / n as f64);
-    let (mut sum, mut weight) = (0.0, 0.0);
-    for i in 0..n {
-        let x = at(i);
-        for j in 0..n {
-            let y = at(j);
-            let w = (-0.5 * ((x / a).powi(2) + (y / b).powi(2))).exp();
-            sum += w * x.hypot(y);
-            weight += w;
-        }
-    }
-    sum / weight
 }

@@ -95,19 +95,29 @@ impl PoseBound {
 /// `E |x|` over its principal deviations, a midpoint rule over +-6 sigma on each (infinite where
 /// a deviation is).
 pub fn expected_turn(cov: &Matrix3<f64>) -> f64 {
+    expected_turn_within(cov, f64::INFINITY)
+}
+
+/// [`expected_turn`] of what is left of the Gaussian where every turn about its principal axes
+/// over `cut_rad` is ruled out (as a mask rules out a large turn): each principal deviation's
+/// range is +-6 sigma or +-`cut_rad`, whichever is narrower (infinite where a deviation is,
+/// cut or not).
+pub fn expected_turn_within(cov: &Matrix3<f64>, cut_rad: f64) -> f64 {
     if !cov.iter().all(|v| v.is_finite()) {
         return f64::INFINITY;
     }
     let s = SymmetricEigen::new(*cov).eigenvalues.map(|v| v.max(0.0).sqrt());
+    // Each deviation's half range in its own sigmas (a zero deviation adds nothing anywhere).
+    let half = s.map(|si| if si > 0.0 { (cut_rad / si).min(6.0) } else { 6.0 });
     let n = 96;
-    let at = |i: usize| -6.0 + 12.0 * (i as f64 + 0.5) / n as f64;
+    let at = |h: f64, i: usize| h * (-1.0 + 2.0 * (i as f64 + 0.5) / n as f64);
     let (mut sum, mut weight) = (0.0, 0.0);
     for i in 0..n {
-        let x = at(i);
+        let x = at(half[0], i);
         for j in 0..n {
-            let y = at(j);
+            let y = at(half[1], j);
             for k in 0..n {
-                let z = at(k);
+                let z = at(half[2], k);
                 let w = (-0.5 * (x * x + y * y + z * z)).exp();
                 sum += w * Vector3::new(s[0] * x, s[1] * y, s[2] * z).norm();
                 weight += w;
@@ -322,6 +332,12 @@ mod tests {
         assert!((one / (s * (2.0 / PI).sqrt()) - 1.0).abs() < 1e-3, "{one}");
         let unbounded = Matrix3::from_diagonal(&Vector3::new(s * s, f64::INFINITY, 0.0));
         assert_eq!(expected_turn(&unbounded), f64::INFINITY);
+        // Cut at one sigma: the truncated half-normal's mean, sigma sqrt(2/pi) (1 - e^-1/2) /
+        // erf(1/sqrt 2) = 0.45986 sigma.
+        let one_axis = Matrix3::from_diagonal(&Vector3::new(s * s, 0.0, 0.0));
+        let cut = expected_turn_within(&one_axis, s);
+        assert!((cut / (0.45986 * s) - 1.0).abs() < 1e-3, "{cut}");
+        assert_eq!(expected_turn_within(&one_axis, 7.0 * s), one);
     }
 
     #[test]
